@@ -1,0 +1,1 @@
+//! Synthetic mesh sets with known parameters. Filled in by the synthetic-data work.
