@@ -1,1 +1,68 @@
-fn main() {}
+//! `meshvae`: a thin command over the pipeline's libraries. Each subcommand lives in a module
+//! named for it; errors from every library become one message on stderr and exit code 1
+//! (2 for usage errors, from clap).
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+mod error;
+mod features;
+mod info;
+mod pack;
+mod simplify;
+mod synth;
+
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+pub use error::CliError;
+
+/// Train and use mesh variational autoencoders on sets of meshes that share one connectivity.
+#[derive(Parser)]
+#[command(name = "meshvae", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Check a mesh set and print its counts and quality report.
+    Info(info::InfoArgs),
+    /// Write the synthetic bend/twist capsule set as OBJ files plus labels.csv.
+    Synth(synth::SynthArgs),
+    /// Pack a mesh set into one binary cache file (.mvset) that loads fast.
+    Pack(pack::PackArgs),
+    /// Compute the ACAP deformation features of a set (safetensors, normalisation as metadata).
+    Features(features::FeaturesArgs),
+    /// Features -> meshes for every frame; prints the reconstruction errors.
+    Roundtrip(features::RoundtripArgs),
+    /// Simplify a mesh (or a set's template) by quadric edge collapse with the edge-length term.
+    Simplify(simplify::SimplifyArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Info(args) => info::run(args),
+        Command::Synth(args) => synth::run(args),
+        Command::Pack(args) => pack::run(args),
+        Command::Features(args) => features::run_features(args),
+        Command::Roundtrip(args) => features::run_roundtrip(args),
+        Command::Simplify(args) => simplify::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Prints the warnings met while reading, one per line on stderr.
+pub fn print_warnings(warnings: &[mesh_io::Warning]) {
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+}

@@ -1,0 +1,30 @@
+//! The command's errors: each library's error, plus the command's own. `main` prints them.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    #[error(transparent)]
+    MeshIo(#[from] mesh_io::MeshIoError),
+    #[error(transparent)]
+    Features(#[from] deform_features::FeatureError),
+    #[error(transparent)]
+    Simplify(#[from] qem_simplify::SimplifyError),
+    /// A bad combination of arguments that clap cannot catch.
+    #[error("{argument}: {message}")]
+    Argument {
+        argument: &'static str,
+        message: String,
+    },
+    #[error("{}: {message}", path.display())]
+    Output { path: PathBuf, message: String },
+}
+
+impl CliError {
+    pub fn argument(argument: &'static str, message: impl Into<String>) -> Self {
+        Self::Argument {
+            argument,
+            message: message.into(),
+        }
+    }
+}
