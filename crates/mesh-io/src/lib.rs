@@ -46,7 +46,7 @@ pub use error::{MeshIoError, Result, Warning};
 pub use format::{MeshFormat, read_mesh, write_mesh};
 pub use mesh::{Face, MeshSet, Point, TriMesh, bbox, bbox_diagonal, check_same_connectivity};
 pub use quality::QualityReport;
-pub use set::{load_files, load_folder, load_set};
+pub use set::{load_files, load_folder, load_set, write_folder};
 
 /// A value read from files, with the warnings met on the way (quads split, …).
 #[derive(Debug, Clone, PartialEq)]

@@ -131,7 +131,9 @@ impl MeshSet {
         if vertex_count == 0 || faces.is_empty() {
             return Err(invalid("a mesh set needs vertices and faces".into()));
         }
-        if positions.len() % vertex_count != 0 || positions.len() / vertex_count != names.len() {
+        if !positions.len().is_multiple_of(vertex_count)
+            || positions.len() / vertex_count != names.len()
+        {
             return Err(invalid(format!(
                 "{} positions do not make {} frames of {} vertices",
                 positions.len(),

@@ -117,6 +117,33 @@ fn frame_names(files: &[PathBuf], warnings: &mut Vec<Warning>) -> Vec<String> {
         .collect()
 }
 
+/// Writes every frame of `set` into `dir` (created if missing) as `<name>.obj`, plus
+/// `labels.csv` for a labelled set, so that [`load_folder`] reads the same set back. Returns the
+/// paths of the mesh files. Each file is written atomically.
+pub fn write_folder(dir: &Path, set: &MeshSet) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| MeshIoError::io(dir, e))?;
+    let files: Vec<PathBuf> = set
+        .names()
+        .iter()
+        .map(|n| dir.join(format!("{n}.obj")))
+        .collect();
+    files
+        .par_iter()
+        .enumerate()
+        .try_for_each(|(i, f)| crate::obj::write_obj(f, &set.mesh(i)))?;
+    if let Some(labels) = set.labels() {
+        let names: Vec<String> = files
+            .iter()
+            .map(|f| {
+                f.file_name()
+                    .map_or(String::new(), |n| n.to_string_lossy().into())
+            })
+            .collect();
+        labels::write_labels(&dir.join(LABELS_FILE), &names, labels)?;
+    }
+    Ok(files)
+}
+
 /// The mesh files directly inside `dir` (hidden files skipped), in natural order.
 pub fn list_mesh_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries = std::fs::read_dir(dir).map_err(|e| MeshIoError::io(dir, e))?;
@@ -176,6 +203,24 @@ fn trim_zeros(digits: &[u8]) -> &[u8] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn folder_round_trip_keeps_order_names_and_labels() {
+        let dir = std::env::temp_dir().join(format!("mesh-io-folder-{}", std::process::id()));
+        let faces = vec![[0, 1, 2], [0, 2, 3]];
+        let names: Vec<String> = ["1", "2", "10"].map(String::from).to_vec();
+        let positions = (0..12)
+            .map(|i| [i as f32, 0.5, -(i as f32) / 3.0])
+            .collect();
+        let set = MeshSet::from_flat(faces, 4, positions, names)
+            .unwrap()
+            .with_labels(["a", "b", "a"].map(String::from).to_vec())
+            .unwrap();
+        write_folder(&dir, &set).unwrap();
+        let back = load_folder(&dir).unwrap().value;
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(back, set);
+    }
 
     #[test]
     fn natural_order() {
