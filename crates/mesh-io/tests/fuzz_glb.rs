@@ -2,26 +2,13 @@
 //! the same file as `.gltf` with a data: URI). Every read must return `Ok` with a valid set or
 //! an `Err`; never panic, never over-read.
 
+mod common;
+use common::{Rng, base64};
+
 use mesh_io::glb::{parse_gltf_mesh, parse_gltf_set, write_glb_set_to};
 use mesh_io::{MeshSet, Point};
 use serde_json::Value;
 use std::path::Path;
-
-/// xorshift64: small, deterministic, good enough to pick mutations.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 /// Three frames of a 2 × 3 grid; frame 2 needs corrections (values near 0), and the set is
 /// labelled, so every part of the format is present.
@@ -65,28 +52,6 @@ fn wrap(json: &[u8], bin: &[u8]) -> Vec<u8> {
     out.extend((bin.len() as u32).to_le_bytes());
     out.extend(b"BIN\0");
     out.extend(bin);
-    out
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            let c = if k <= chunk.len() {
-                ALPHABET[(n >> (18 - 6 * k) & 63) as usize]
-            } else {
-                b'='
-            };
-            out.push(c as char);
-        }
-    }
     out
 }
 

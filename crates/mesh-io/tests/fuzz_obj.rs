@@ -1,23 +1,12 @@
 //! Thousands of mutated and truncated OBJ files: each parse returns a valid mesh or an error,
 //! never a panic.
 
+mod common;
+use common::Rng;
+
 use mesh_io::TriMesh;
 use mesh_io::obj::{parse_obj, write_obj_to};
 use std::path::Path;
-
-/// xorshift64*: deterministic, no dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 fn grid_obj() -> Vec<u8> {
     let n = 7;

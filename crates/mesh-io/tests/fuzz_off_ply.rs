@@ -2,6 +2,9 @@
 //! returns a valid mesh or an error, never a panic, and a header claiming huge counts never
 //! makes a reader allocate in proportion to the claim.
 
+mod common;
+use common::Rng;
+
 use mesh_io::off::{parse_off, write_off_to};
 use mesh_io::ply::{PlyEncoding, parse_ply, write_ply_to};
 use mesh_io::{Loaded, Result, TriMesh};
@@ -49,22 +52,6 @@ unsafe impl GlobalAlloc for LargestAllocation {
 
 #[global_allocator]
 static ALLOCATOR: LargestAllocation = LargestAllocation;
-
-/// xorshift64*: deterministic, no dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 type Reader = fn(&[u8], &Path) -> Result<Loaded<TriMesh>>;
 

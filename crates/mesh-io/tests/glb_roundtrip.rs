@@ -1,5 +1,8 @@
 //! GLB/glTF round trips (bit-exact), hand-written glTF files, and the reader's error cases.
 
+mod common;
+use common::base64;
+
 use mesh_io::glb::{
     FRAMES_PER_SECOND, parse_gltf_mesh, parse_gltf_set, read_gltf_mesh, read_gltf_set,
     write_glb_mesh, write_glb_set, write_glb_set_to,
@@ -245,28 +248,6 @@ fn single_mesh_round_trips_and_is_not_a_set() {
     ));
     assert!(!bad_path.exists());
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            let c = if k <= chunk.len() {
-                ALPHABET[(n >> (18 - 6 * k) & 63) as usize]
-            } else {
-                b'='
-            };
-            out.push(c as char);
-        }
-    }
-    out
 }
 
 const QUAD: [Point; 4] = [
