@@ -25,7 +25,10 @@ fn stderr(out: &Output) -> String {
 /// Asserts a failure with a message on stderr that contains every one of `parts`, and no panic.
 fn assert_fails_with(out: &Output, parts: &[&str]) {
     let err = stderr(out);
-    assert!(!out.status.success(), "expected failure, got success; stderr: {err}");
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stderr: {err}"
+    );
     assert_eq!(out.status.code(), Some(1), "stderr: {err}");
     assert!(!err.contains("panicked"), "panic: {err}");
     for p in parts {
@@ -42,7 +45,9 @@ fn write(dir: &Path, name: &str, text: &str) {
 #[test]
 fn info_json_counts_on_the_real_sets() {
     for &(name, meshes, vertices, faces, boundary) in datasets::KNOWN {
-        let Some(dir) = datasets::find_or_skip(name) else { continue };
+        let Some(dir) = datasets::find_or_skip(name) else {
+            continue;
+        };
         let out = meshvae(&["info", dir.to_str().unwrap(), "--json"]);
         assert!(out.status.success(), "{name}: {}", stderr(&out));
         let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -58,9 +63,10 @@ fn info_json_counts_on_the_real_sets() {
 
 #[test]
 fn mixed_connectivity_names_the_first_mismatching_file() {
-    let (Some(horse), Some(samba)) =
-        (datasets::find_or_skip("horse-gallop"), datasets::find_or_skip("samba"))
-    else {
+    let (Some(horse), Some(samba)) = (
+        datasets::find_or_skip("horse-gallop"),
+        datasets::find_or_skip("samba"),
+    ) else {
         return;
     };
     let dir = scratch("mixed");
@@ -72,17 +78,36 @@ fn mixed_connectivity_names_the_first_mismatching_file() {
     }
     // Natural order puts 0001.obj … 0048.obj (horse) before mesh_0000.obj (samba).
     let out = meshvae(&["info", dir.to_str().unwrap()]);
-    assert_fails_with(&out, &["mesh_0000.obj", "9971 vertices", "0001.obj has 8431"]);
+    assert_fails_with(
+        &out,
+        &["mesh_0000.obj", "9971 vertices", "0001.obj has 8431"],
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn broken_files_give_clear_messages() {
     let cases: [(&str, &str, &[&str]); 5] = [
-        ("truncated", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3", &["b.obj:6:", "2 vertices"]),
-        ("nan", "v 0 0 0\nv nan 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n", &["b.obj:2:", "non-finite"]),
-        ("index", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 9\n", &["b.obj:6:", "index 9", "4 vertices"]),
-        ("faces", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 4 3\n", &["b.obj", "face 1", "a.obj"]),
+        (
+            "truncated",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3",
+            &["b.obj:6:", "2 vertices"],
+        ),
+        (
+            "nan",
+            "v 0 0 0\nv nan 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n",
+            &["b.obj:2:", "non-finite"],
+        ),
+        (
+            "index",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 9\n",
+            &["b.obj:6:", "index 9", "4 vertices"],
+        ),
+        (
+            "faces",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 4 3\n",
+            &["b.obj", "face 1", "a.obj"],
+        ),
         ("garbage", "v 0 0 zero\n", &["b.obj:1:", "bad coordinate"]),
     ];
     for (name, text, parts) in cases {
@@ -98,9 +123,15 @@ fn broken_files_give_clear_messages() {
 #[test]
 fn empty_and_missing_sets() {
     let dir = scratch("empty");
-    assert_fails_with(&meshvae(&["info", dir.to_str().unwrap()]), &["no mesh files"]);
+    assert_fails_with(
+        &meshvae(&["info", dir.to_str().unwrap()]),
+        &["no mesh files"],
+    );
     write(&dir, "a.obj", TRI);
-    assert_fails_with(&meshvae(&["info", dir.to_str().unwrap()]), &["at least two meshes"]);
+    assert_fails_with(
+        &meshvae(&["info", dir.to_str().unwrap()]),
+        &["at least two meshes"],
+    );
     let missing = dir.join("nowhere");
     assert_fails_with(&meshvae(&["info", missing.to_str().unwrap()]), &["nowhere"]);
     std::fs::remove_dir_all(&dir).unwrap();
@@ -113,7 +144,12 @@ fn pack_then_info_reads_the_cache() {
     write(&dir, "2.obj", &TRI.replace("v 0 0 1", "v 0 0 2"));
     write(&dir, "labels.csv", "file,label\n1.obj,rest\n2.obj,up\n");
     let cache = dir.join("set.mvset");
-    let out = meshvae(&["pack", dir.to_str().unwrap(), "--out", cache.to_str().unwrap()]);
+    let out = meshvae(&[
+        "pack",
+        dir.to_str().unwrap(),
+        "--out",
+        cache.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let out = meshvae(&["info", cache.to_str().unwrap(), "--json"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -122,7 +158,31 @@ fn pack_then_info_reads_the_cache() {
     assert_eq!(json["vertices"], 4);
     assert_eq!(json["boundary_edges"], 4);
     assert_eq!(json["labels"], serde_json::json!(["rest", "up"]));
-    // A corrupt cache is an error naming it, and nothing is left behind by a failed pack.
+    // The same set as one GLB (frames as morph targets) reads back with the same report.
+    let glb = dir.join("set.glb");
+    let out = meshvae(&[
+        "pack",
+        cache.to_str().unwrap(),
+        "--out",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = meshvae(&["info", glb.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let again: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(again, json);
+    let bad = dir.join("set.txt");
+    assert_fails_with(
+        &meshvae(&[
+            "pack",
+            cache.to_str().unwrap(),
+            "--out",
+            bad.to_str().unwrap(),
+        ]),
+        &["--out", "set.txt", ".mvset or .glb"],
+    );
+    assert!(!bad.exists());
+    // A corrupt cache is an error naming it.
     std::fs::write(&cache, b"garbage").unwrap();
     assert_fails_with(&meshvae(&["info", cache.to_str().unwrap()]), &["set.mvset"]);
     std::fs::remove_dir_all(&dir).unwrap();
