@@ -1,6 +1,6 @@
 //! `meshvae info <SET> [--json]`
 
-use crate::{print_warnings, CliError};
+use crate::{CliError, print_warnings};
 use mesh_io::QualityReport;
 use std::path::PathBuf;
 

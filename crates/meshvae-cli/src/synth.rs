@@ -1,7 +1,7 @@
 //! `meshvae synth --out DIR [--seed S]`
 
 use crate::CliError;
-use mesh_io::synth::{generate, SynthConfig};
+use mesh_io::synth::{SynthConfig, generate};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -19,7 +19,10 @@ pub struct SynthArgs {
 
 pub fn run(args: &SynthArgs) -> Result<(), CliError> {
     if args.out.is_file() {
-        return Err(CliError::argument("--out", format!("{} is a file, not a folder", args.out.display())));
+        return Err(CliError::argument(
+            "--out",
+            format!("{} is a file, not a folder", args.out.display()),
+        ));
     }
     let config = SynthConfig {
         seed: args.seed,
