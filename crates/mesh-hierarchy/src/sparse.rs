@@ -28,7 +28,7 @@ impl CsrMatrix {
         indices: Vec<u32>,
         values: Vec<f64>,
     ) -> Result<Self, CsrError> {
-        if indptr.len() != rows + 1 || indptr[0] != 0 {
+        if Some(indptr.len()) != rows.checked_add(1) || indptr[0] != 0 {
             return Err(CsrError(format!(
                 "indptr has {} entries for {rows} rows",
                 indptr.len()
@@ -41,8 +41,8 @@ impl CsrMatrix {
         }
         for r in 0..rows {
             let (a, b) = (indptr[r], indptr[r + 1]);
-            if a > b {
-                return Err(CsrError(format!("indptr decreases at row {r}")));
+            if a > b || b > indices.len() {
+                return Err(CsrError(format!("indptr decreases or overruns at row {r}")));
             }
             let row = &indices[a..b];
             if row.windows(2).any(|w| w[0] >= w[1]) {

@@ -1,0 +1,253 @@
+//! Pooling and de-pooling operators between two levels, and the names of the poolers compared
+//! in the paper's ablation.
+
+use crate::error::HierarchyError;
+use crate::sparse::CsrMatrix;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Which pooling a hierarchy uses (the paper's ablation, Table 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Pooler {
+    /// The paper's: simplification with the edge-length term (λ = 0.001) and mean pooling.
+    /// Parsed from `ours` or `mean`.
+    Ours,
+    /// Classical QEM (λ = 0), same mean pooling.
+    Qem,
+    /// The paper's simplification with max pooling (signed largest magnitude per cluster).
+    Max,
+    /// Ranjan et al. 2018 (CoMA): keep the survivors of classical QEM, up-sample by barycentric
+    /// coordinates in the nearest coarse triangle.
+    Sampling,
+    /// No pooling: identity operators, every level is the template.
+    None,
+}
+
+impl Pooler {
+    /// All poolers, in the ablation's order.
+    pub const ALL: [Pooler; 5] = [Self::Ours, Self::Qem, Self::Max, Self::Sampling, Self::None];
+
+    /// The simplifier's λ for this pooler (`None` for the no-pooling ablation).
+    pub fn lambda(self) -> Option<f64> {
+        match self {
+            Self::Ours | Self::Max => Some(qem_simplify::DEFAULT_LAMBDA),
+            Self::Qem | Self::Sampling => Some(0.0),
+            Self::None => Option::None,
+        }
+    }
+}
+
+impl fmt::Display for Pooler {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Ours => "ours",
+            Self::Qem => "qem",
+            Self::Max => "max",
+            Self::Sampling => "sampling",
+            Self::None => "none",
+        })
+    }
+}
+
+/// Why a pooler name was not recognised.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown pooler {0:?} (expected ours, mean, qem, max, sampling or none)")]
+pub struct UnknownPooler(pub String);
+
+impl FromStr for Pooler {
+    type Err = UnknownPooler;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "ours" | "mean" => Ok(Self::Ours),
+            "qem" => Ok(Self::Qem),
+            "max" => Ok(Self::Max),
+            "sampling" => Ok(Self::Sampling),
+            "none" => Ok(Self::None),
+            _ => Err(UnknownPooler(s.to_owned())),
+        }
+    }
+}
+
+/// How mean de-pooling spreads a coarse value over its cluster.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum DepoolMode {
+    /// Copy the coarse value to every member: D[v, c] = 1, so P·D = I.
+    #[default]
+    Copy,
+    /// The authors' code: D = Pᵀ, the coarse value divided by the cluster size
+    /// (/work/shared/notes/authors-code.md §2.3).
+    Transpose,
+}
+
+/// The operators from one level (fine, n vertices) to the next (coarse, m vertices).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoolingOp {
+    /// Which pooler built it.
+    pub kind: Pooler,
+    /// m×n: coarse = pool · fine (mean pooling, or selection for sampling). For `Max` this is
+    /// the mean matrix too; [`PoolingOp::pool`] applies the max instead.
+    pub pool: CsrMatrix,
+    /// n×m: fine = depool · coarse (copy, Pᵀ, or barycentric up-sampling).
+    pub depool: CsrMatrix,
+    /// Members (fine indices, ascending) of each coarse vertex's cluster; `None` for sampling
+    /// and no pooling.
+    pub clusters: Option<Vec<Vec<u32>>>,
+}
+
+impl PoolingOp {
+    /// Identity operators on n vertices (the no-pooling ablation).
+    pub fn identity(n: usize) -> Self {
+        Self {
+            kind: Pooler::None,
+            pool: CsrMatrix::identity(n),
+            depool: CsrMatrix::identity(n),
+            clusters: Option::None,
+        }
+    }
+
+    /// Mean pooling (and max, for `kind == Max`) over the clusters given by `cluster_of`
+    /// (fine → coarse, every coarse index in 0..coarse_count used).
+    pub fn from_clusters(
+        kind: Pooler,
+        cluster_of: &[u32],
+        coarse_count: usize,
+        depool: DepoolMode,
+    ) -> Result<Self, crate::sparse::CsrError> {
+        let mut clusters = vec![Vec::new(); coarse_count];
+        for (v, &c) in cluster_of.iter().enumerate() {
+            let cluster = clusters.get_mut(c as usize).ok_or_else(|| {
+                crate::sparse::CsrError(format!("cluster {c} beyond {coarse_count}"))
+            })?;
+            cluster.push(v as u32);
+        }
+        if let Some(c) = clusters.iter().position(Vec::is_empty) {
+            return Err(crate::sparse::CsrError(format!("cluster {c} is empty")));
+        }
+        let mut pool_t = Vec::with_capacity(cluster_of.len());
+        let mut depool_t = Vec::with_capacity(cluster_of.len());
+        for (c, members) in clusters.iter().enumerate() {
+            let w = 1.0 / members.len() as f64;
+            for &v in members {
+                pool_t.push((c as u32, v, w));
+                let d = match depool {
+                    DepoolMode::Copy => 1.0,
+                    DepoolMode::Transpose => w,
+                };
+                depool_t.push((v, c as u32, d));
+            }
+        }
+        let n = cluster_of.len();
+        Ok(Self {
+            kind,
+            pool: CsrMatrix::from_triplets(coarse_count, n, &pool_t)?,
+            depool: CsrMatrix::from_triplets(n, coarse_count, &depool_t)?,
+            clusters: Some(clusters),
+        })
+    }
+
+    /// Fine vertex count n.
+    pub fn fine_count(&self) -> usize {
+        self.pool.cols()
+    }
+
+    /// Coarse vertex count m.
+    pub fn coarse_count(&self) -> usize {
+        self.pool.rows()
+    }
+
+    /// Pools `channels` interleaved channels (`fine.len() == n · channels`, vertex-major):
+    /// the member of largest magnitude with its sign for `Max` (ties: the negative one, as the
+    /// authors' code), `pool · fine` otherwise. Errors when `fine` has not n · channels values.
+    pub fn pool(&self, fine: &[f64], channels: usize) -> Result<Vec<f64>, HierarchyError> {
+        check_len("fine", fine, self.fine_count(), channels)?;
+        Ok(match (&self.kind, &self.clusters) {
+            (Pooler::Max, Some(clusters)) => {
+                let mut out = vec![0.0; clusters.len() * channels];
+                for (c, members) in clusters.iter().enumerate() {
+                    for k in 0..channels {
+                        let mut best = 0.0f64;
+                        for &v in members {
+                            let x = fine[v as usize * channels + k];
+                            if x.abs() > best.abs() || (x.abs() == best.abs() && x < best) {
+                                best = x;
+                            }
+                        }
+                        out[c * channels + k] = best;
+                    }
+                }
+                out
+            }
+            _ => apply(&self.pool, fine, channels),
+        })
+    }
+
+    /// De-pools `channels` interleaved channels: `depool · coarse`. Errors when `coarse` has not
+    /// m · channels values.
+    pub fn depool(&self, coarse: &[f64], channels: usize) -> Result<Vec<f64>, HierarchyError> {
+        check_len("coarse", coarse, self.coarse_count(), channels)?;
+        Ok(apply(&self.depool, coarse, channels))
+    }
+}
+
+fn check_len(
+    argument: &'static str,
+    x: &[f64],
+    vertices: usize,
+    channels: usize,
+) -> Result<(), HierarchyError> {
+    if Some(x.len()) == vertices.checked_mul(channels) {
+        Ok(())
+    } else {
+        Err(HierarchyError::InvalidArgument {
+            argument,
+            message: format!(
+                "{} values for {vertices} vertices × {channels} channels",
+                x.len()
+            ),
+        })
+    }
+}
+
+/// y = A x for `channels` interleaved columns (vertex-major).
+fn apply(a: &CsrMatrix, x: &[f64], channels: usize) -> Vec<f64> {
+    let mut y = vec![0.0; a.rows() * channels];
+    for r in 0..a.rows() {
+        let (cols, vals) = a.row(r);
+        for (&c, &w) in cols.iter().zip(vals) {
+            for k in 0..channels {
+                y[r * channels + k] += w * x[c as usize * channels + k];
+            }
+        }
+    }
+    y
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip() {
+        for p in Pooler::ALL {
+            assert_eq!(p.to_string().parse::<Pooler>(), Ok(p));
+            let json = serde_json::to_string(&p).unwrap();
+            assert_eq!(json, format!("\"{p}\""));
+        }
+        assert_eq!("mean".parse::<Pooler>(), Ok(Pooler::Ours));
+        assert!("avg".parse::<Pooler>().is_err());
+    }
+
+    #[test]
+    fn max_pooling_takes_signed_largest_magnitude() {
+        let op = PoolingOp::from_clusters(Pooler::Max, &[0, 1, 0, 1], 2, DepoolMode::Copy).unwrap();
+        // two channels; cluster 0 = {0, 2}, cluster 1 = {1, 3}
+        let fine = [1.0, -2.0, 5.0, 0.5, -3.0, 2.0, 4.0, -0.5];
+        assert!(op.pool(&fine, 3).is_err());
+        assert_eq!(op.pool(&fine, 2).unwrap(), vec![-3.0, -2.0, 5.0, -0.5]);
+        assert!(PoolingOp::from_clusters(Pooler::Ours, &[0, 2], 2, DepoolMode::Copy).is_err());
+        assert!(PoolingOp::from_clusters(Pooler::Ours, &[0, 0], 2, DepoolMode::Copy).is_err());
+    }
+}
