@@ -1,0 +1,602 @@
+//! Raw CPU kernels on flat slices (no candle types), shared by the custom ops.
+//!
+//! Layout: the layers receive and return `[B, V, C]` (row-major). A sparse product gathers, for
+//! each output vertex, the rows of its neighbours; in `[B, V, C]` each such row is only `C` values
+//! (36 bytes for C = 9) at an address that, for a mesh whose vertex order has little locality
+//! (elephant-gallop: median index gap 78, 90th percentile 21,000), is a cache miss. So the
+//! kernels gather from a *channel-major* copy `[V, C, B]`, where one neighbour is `C·B`
+//! contiguous values (1,152 bytes at B = 32), and per-vertex arithmetic runs its inner loops over
+//! the batch (long, vectorisable) rather than over 9 channels.
+//!
+//! Work is split over chunks of [`CHUNK_ROWS`] vertices, one rayon task each. Batch-major inputs
+//! and outputs are transposed chunk by chunk through a small staging buffer, batch slice by batch
+//! slice, so memory is always read and written in long runs. The CSR arrays (a few MB even for
+//! 42k vertices) stay in cache.
+//!
+//! SIMD: the hot per-chunk functions are compiled twice ([`multiversion`]): for AVX2 + FMA, used
+//! when the CPU has them, and for the baseline target.
+
+use mesh_hierarchy::CsrMatrix;
+use rayon::prelude::*;
+use std::ops::{Add, AddAssign, Mul, Sub};
+
+/// Vertices per rayon task: a chunk's staging buffers (64 × 288 floats each at B = 32, C = 9)
+/// stay in the core's L2 cache.
+pub(crate) const CHUNK_ROWS: usize = 64;
+
+/// The float types the kernels run on (f32 and f64).
+pub(crate) trait Real:
+    Copy
+    + Send
+    + Sync
+    + 'static
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + AddAssign
+{
+    const ZERO: Self;
+    fn from_f64(v: f64) -> Self;
+    fn to_f64(self) -> f64;
+    fn abs(self) -> Self;
+    /// self · a + b in one rounding (only fast where FMA instructions are enabled).
+    fn mul_add(self, a: Self, b: Self) -> Self;
+    /// The matrix values in this precision.
+    fn values(csr: &Csr) -> &[Self];
+    /// The recycled buffers of this type (see `scratch.rs`).
+    fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>>;
+    /// dst[s·B + b] = runs[b][s] (see `transpose.rs`).
+    fn gather_runs(runs: &[&[Self]], dst: &mut [Self]) {
+        crate::transpose::gather_runs_scalar(runs, dst);
+    }
+    /// runs[b][s] = src[s·B + b] (see `transpose.rs`).
+    fn scatter_runs(src: &[Self], runs: &mut [&mut [Self]]) {
+        crate::transpose::scatter_runs_scalar(src, runs);
+    }
+}
+
+impl Real for f32 {
+    const ZERO: Self = 0.0;
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    fn abs(self) -> Self {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        f32::mul_add(self, a, b)
+    }
+    fn values(csr: &Csr) -> &[Self] {
+        &csr.values_f32
+    }
+    fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
+        &crate::scratch::POOL_F32
+    }
+    fn gather_runs(runs: &[&[Self]], dst: &mut [Self]) {
+        crate::transpose::gather_runs_f32(runs, dst);
+    }
+    fn scatter_runs(src: &[Self], runs: &mut [&mut [Self]]) {
+        crate::transpose::scatter_runs_f32(src, runs);
+    }
+}
+
+impl Real for f64 {
+    const ZERO: Self = 0.0;
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn abs(self) -> Self {
+        f64::abs(self)
+    }
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        f64::mul_add(self, a, b)
+    }
+    fn values(csr: &Csr) -> &[Self] {
+        &csr.values_f64
+    }
+    fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
+        &crate::scratch::POOL_F64
+    }
+}
+
+/// How a kernel spells a multiply-add: [`Plain`] (a·b + c, for any CPU) or [`Fused`] (one FMA
+/// instruction; only used in code compiled with the `fma` target feature, where `mul_add` is an
+/// instruction rather than a library call).
+pub(crate) trait Madd {
+    fn madd<T: Real>(a: T, b: T, c: T) -> T;
+}
+
+pub(crate) struct Plain;
+pub(crate) struct Fused;
+
+impl Madd for Plain {
+    #[inline(always)]
+    fn madd<T: Real>(a: T, b: T, c: T) -> T {
+        a * b + c
+    }
+}
+
+impl Madd for Fused {
+    #[inline(always)]
+    fn madd<T: Real>(a: T, b: T, c: T) -> T {
+        a.mul_add(b, c)
+    }
+}
+
+/// Defines `fn $name<T: Real>(args)` running `$body::<T, Fused>` compiled for AVX2 + FMA when
+/// the CPU has both (std caches the check), else `$body::<T, Plain>` for the baseline target.
+/// `$body` must be `#[inline(always)]` so that it is compiled inside each variant.
+macro_rules! multiversion {
+    ($(#[$meta:meta])* fn $name:ident<T>($($arg:ident: $ty:ty),* $(,)?) => $body:ident) => {
+        $(#[$meta])*
+        fn $name<T: $crate::kernel::Real>($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            {
+                $(#[$meta])*
+                #[target_feature(enable = "avx2,fma")]
+                fn fast<T: $crate::kernel::Real>($($arg: $ty),*) {
+                    $body::<T, $crate::kernel::Fused>($($arg),*)
+                }
+                if std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+                    && !$crate::kernel::baseline_forced()
+                {
+                    // SAFETY: `fast` needs AVX2 and FMA, which this CPU was just found to have.
+                    return unsafe { fast::<T>($($arg),*) };
+                }
+            }
+            $body::<T, $crate::kernel::Plain>($($arg),*)
+        }
+    };
+}
+pub(crate) use multiversion;
+
+/// Tests set this to run the baseline variants on a CPU that has AVX2 + FMA.
+#[cfg(test)]
+pub(crate) static FORCE_BASELINE: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+#[inline(always)]
+pub(crate) fn baseline_forced() -> bool {
+    #[cfg(test)]
+    {
+        FORCE_BASELINE.load(std::sync::atomic::Ordering::Relaxed)
+    }
+    #[cfg(not(test))]
+    {
+        false
+    }
+}
+
+/// A sparse matrix as the kernels read it: the pattern once, the values in both precisions
+/// (converted once at construction, never per call).
+#[derive(Debug)]
+pub(crate) struct Csr {
+    pub rows: usize,
+    pub cols: usize,
+    pub indptr: Vec<usize>,
+    pub indices: Vec<u32>,
+    pub values_f32: Vec<f32>,
+    pub values_f64: Vec<f64>,
+}
+
+impl Csr {
+    pub fn from_matrix(m: &CsrMatrix) -> Self {
+        Self {
+            rows: m.rows(),
+            cols: m.cols(),
+            indptr: m.indptr().to_vec(),
+            indices: m.indices().to_vec(),
+            values_f32: m.values().iter().map(|&v| v as f32).collect(),
+            values_f64: m.values().to_vec(),
+        }
+    }
+
+    pub fn nnz(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Row `r` as (columns, values).
+    #[inline(always)]
+    pub fn row<T: Real>(&self, r: usize) -> (&[u32], &[T]) {
+        let span = self.indptr[r]..self.indptr[r + 1];
+        (&self.indices[span.clone()], &T::values(self)[span])
+    }
+}
+
+/// Per-task staging buffers: allocated once per rayon job (`for_each_init`, `fold`) rather than
+/// per chunk. Contents are left from the previous chunk; every kernel overwrites what it uses.
+pub(crate) struct Staging<T> {
+    bufs: [Vec<T>; 3],
+}
+
+impl<T: Real> Staging<T> {
+    pub fn new() -> Self {
+        Self {
+            bufs: [Vec::new(), Vec::new(), Vec::new()],
+        }
+    }
+
+    /// Three buffers of the given lengths.
+    pub fn get(&mut self, lens: [usize; 3]) -> [&mut [T]; 3] {
+        let [a, b, c] = &mut self.bufs;
+        for (v, &n) in [&mut *a, &mut *b, &mut *c].into_iter().zip(&lens) {
+            if v.len() < n {
+                v.resize(n, T::ZERO);
+            }
+        }
+        [&mut a[..lens[0]], &mut b[..lens[1]], &mut c[..lens[2]]]
+    }
+}
+
+/// The first vertex of chunk `chunk` and its vertex count, for `v` vertices.
+#[inline(always)]
+pub(crate) fn chunk_span(chunk: usize, v: usize) -> (usize, usize) {
+    let i0 = chunk * CHUNK_ROWS;
+    (i0, CHUNK_ROWS.min(v.saturating_sub(i0)))
+}
+
+/// acc = Σ_j a[row, j] · src[j, :] over one row's non-zeros; `src` is `[V, n]`.
+#[inline(always)]
+pub(crate) fn gather_row<T: Real, M: Madd>(
+    cols: &[u32],
+    vals: &[T],
+    src: &[T],
+    n: usize,
+    acc: &mut [T],
+) {
+    let mut nonzeros = cols.iter().zip(vals);
+    // The first product initialises acc (no separate zeroing pass over it).
+    match nonzeros.next() {
+        None => acc.fill(T::ZERO),
+        Some((&j, &v)) => {
+            for (z, &s) in acc.iter_mut().zip(&src[j as usize * n..][..n]) {
+                *z = v * s;
+            }
+        }
+    }
+    for (&j, &v) in nonzeros {
+        for (z, &s) in acc.iter_mut().zip(&src[j as usize * n..][..n]) {
+            *z = M::madd(v, s, *z);
+        }
+    }
+}
+
+/// out[i, :] = alpha · Σ_j a[i, j] · src[j, :] + beta · prev[i, :] (no `prev`: 0), every row `n`
+/// values wide: `src` is `[a.cols, n]`, `out` and `prev` `[a.rows, n]`.
+pub(crate) fn spmm_axpby<T: Real>(
+    a: &Csr,
+    alpha: T,
+    src: &[T],
+    beta: T,
+    prev: Option<&[T]>,
+    out: &mut [T],
+    n: usize,
+) {
+    if n == 0 || a.rows == 0 {
+        return;
+    }
+    out.par_chunks_mut(CHUNK_ROWS * n)
+        .enumerate()
+        .for_each(|(chunk, out)| spmm_chunk(a, (alpha, beta), src, prev, out, n, chunk));
+}
+
+multiversion!(
+    #[allow(clippy::too_many_arguments)]
+    fn spmm_chunk<T>(
+        a: &Csr,
+        coefficients: (T, T),
+        src: &[T],
+        prev: Option<&[T]>,
+        out: &mut [T],
+        n: usize,
+        chunk: usize,
+    ) => spmm_chunk_body
+);
+
+#[inline(always)]
+fn spmm_chunk_body<T: Real, M: Madd>(
+    a: &Csr,
+    (alpha, beta): (T, T),
+    src: &[T],
+    prev: Option<&[T]>,
+    out: &mut [T],
+    n: usize,
+    chunk: usize,
+) {
+    let unit = alpha.to_f64() == 1.0;
+    let i0 = chunk * CHUNK_ROWS;
+    for (li, y) in out.chunks_exact_mut(n).enumerate() {
+        let i = i0 + li;
+        let (cols, vals) = a.row::<T>(i);
+        gather_row::<T, M>(cols, vals, src, n, y);
+        if !unit {
+            y.iter_mut().for_each(|z| *z = alpha * *z);
+        }
+        if let Some(prev) = prev {
+            for (z, &p) in y.iter_mut().zip(&prev[i * n..][..n]) {
+                *z = M::madd(beta, p, *z);
+            }
+        }
+    }
+}
+
+/// The chunk of vertices `i0 .. i0 + cnt` of a `[B, V, c]` array as channel-major blocks:
+/// `buf[(li·c + o)·B + b] = x[b, i0 + li, o]` (each batch slice's part is one long run).
+#[inline(always)]
+pub(crate) fn load_chunk<T: Real>(
+    x: &[T],
+    (batch, v, c): (usize, usize, usize),
+    (i0, cnt): (usize, usize),
+    buf: &mut [T],
+) {
+    let runs: Vec<&[T]> = (0..batch)
+        .map(|b| &x[(b * v + i0) * c..][..cnt * c])
+        .collect();
+    T::gather_runs(&runs, &mut buf[..cnt * c * batch]);
+}
+
+/// `[B, V, c]` → `[V, c, B]`, in a recycled buffer (see `scratch.rs`).
+pub(crate) fn to_channel_major<T: Real>(x: &[T], batch: usize, v: usize, c: usize) -> Vec<T> {
+    let n = batch * c;
+    let mut out = crate::scratch::take(v * n);
+    if n == 0 {
+        return out;
+    }
+    out.par_chunks_mut(CHUNK_ROWS * n)
+        .enumerate()
+        .for_each(|(chunk, o)| load_chunk(x, (batch, v, c), chunk_span(chunk, v), o));
+    out
+}
+
+/// Where one chunk of vertices writes its results.
+pub(crate) enum ChunkOut<'a, T> {
+    /// Into a channel-major `[V, c, B]` array: the chunk's contiguous part.
+    ChannelMajor(&'a mut [T]),
+    /// Into a `[B, V, c]` array: the chunk's run of every batch slice.
+    BatchMajor(Vec<&'a mut [T]>),
+    /// Nowhere (the result is not wanted).
+    Discard,
+}
+
+impl<T: Real> ChunkOut<'_, T> {
+    pub fn is_discard(&self) -> bool {
+        matches!(self, ChunkOut::Discard)
+    }
+
+    /// Stores the chunk's results, given as channel-major blocks `[cnt, c, B]`.
+    #[inline(always)]
+    pub fn store(&mut self, blocks: &[T]) {
+        match self {
+            ChunkOut::ChannelMajor(out) => out.copy_from_slice(&blocks[..out.len()]),
+            ChunkOut::BatchMajor(runs) => T::scatter_runs(blocks, runs),
+            ChunkOut::Discard => {}
+        }
+    }
+}
+
+/// Splits an output of `v` vertices × `c` channels × `batch` into one destination per chunk of
+/// vertices, so chunks can be written in parallel whatever the layout.
+pub(crate) fn chunk_outs<T>(
+    out: &mut [T],
+    channel_major: bool,
+    (batch, v, c): (usize, usize, usize),
+) -> Vec<ChunkOut<'_, T>> {
+    let n_chunks = v.div_ceil(CHUNK_ROWS);
+    if batch * c == 0 {
+        return (0..n_chunks).map(|_| ChunkOut::Discard).collect();
+    }
+    if channel_major {
+        return out
+            .chunks_mut(CHUNK_ROWS * batch * c)
+            .map(ChunkOut::ChannelMajor)
+            .collect();
+    }
+    let mut per_chunk: Vec<Vec<&mut [T]>> =
+        (0..n_chunks).map(|_| Vec::with_capacity(batch)).collect();
+    for slab in out.chunks_mut(v * c) {
+        for (k, part) in slab.chunks_mut(CHUNK_ROWS * c).enumerate() {
+            per_chunk[k].push(part);
+        }
+    }
+    per_chunk.into_iter().map(ChunkOut::BatchMajor).collect()
+}
+
+/// y = A x for x `[B, A.cols, c]`, returning `[B, A.rows, c]` (through a channel-major copy of
+/// x when B > 1; for B = 1 the layouts coincide and the rows are gathered directly).
+pub(crate) fn spmm_batch_major<T: Real>(a: &Csr, x: &[T], batch: usize, c: usize) -> Vec<T> {
+    let mut y = vec![T::ZERO; batch * a.rows * c];
+    if batch <= 1 {
+        spmm_axpby(a, T::from_f64(1.0), x, T::ZERO, None, &mut y, c);
+        return y;
+    }
+    let xcm = to_channel_major(x, batch, a.cols, c);
+    chunk_outs(&mut y, false, (batch, a.rows, c))
+        .into_par_iter()
+        .enumerate()
+        .for_each_init(Staging::new, |staging, (chunk, dest)| {
+            gather_chunk(a, &xcm, batch * c, chunk, dest, staging)
+        });
+    crate::scratch::give(xcm);
+    y
+}
+
+multiversion!(
+    fn gather_chunk<T>(
+        a: &Csr,
+        src: &[T],
+        n: usize,
+        chunk: usize,
+        dest: ChunkOut<'_, T>,
+        staging: &mut Staging<T>,
+    ) => gather_chunk_body
+);
+
+#[inline(always)]
+fn gather_chunk_body<T: Real, M: Madd>(
+    a: &Csr,
+    src: &[T],
+    n: usize,
+    chunk: usize,
+    mut dest: ChunkOut<'_, T>,
+    staging: &mut Staging<T>,
+) {
+    let (i0, cnt) = chunk_span(chunk, a.rows);
+    let [blocks, _, _] = staging.get([cnt * n, 0, 0]);
+    for (li, acc) in blocks.chunks_exact_mut(n).enumerate() {
+        let (cols, vals) = a.row::<T>(i0 + li);
+        gather_row::<T, M>(cols, vals, src, n, acc);
+    }
+    dest.store(blocks);
+}
+
+/// Signed max-magnitude pooling: for every (b, p, ch), the member j of cluster p (the columns of
+/// row p of `pattern`) with the largest |x[b, j, ch]|; ties go to the negative value, then to the
+/// lowest vertex index. Writes the value to `out` `[B, P, c]` and j to `arg` (`u32::MAX` and 0
+/// for an empty cluster).
+pub(crate) fn max_pool<T: Real>(pattern: &Csr, x: &[T], out: &mut [T], arg: &mut [u32], c: usize) {
+    let (rows, cols) = (pattern.rows, pattern.cols);
+    if c == 0 || rows == 0 {
+        return;
+    }
+    out.par_chunks_mut(CHUNK_ROWS * c)
+        .zip(arg.par_chunks_mut(CHUNK_ROWS * c))
+        .enumerate()
+        .for_each(|(chunk, (out, arg))| {
+            let first = chunk * CHUNK_ROWS;
+            for (local, (y, am)) in out
+                .chunks_exact_mut(c)
+                .zip(arg.chunks_exact_mut(c))
+                .enumerate()
+            {
+                let g = first + local;
+                let (b, p) = (g / rows, g % rows);
+                let xb = &x[b * cols * c..][..cols * c];
+                y.fill(T::ZERO);
+                am.fill(u32::MAX);
+                for &j in pattern.row::<T>(p).0 {
+                    let xj = &xb[j as usize * c..][..c];
+                    for ((z, m), &v) in y.iter_mut().zip(am.iter_mut()).zip(xj) {
+                        let better =
+                            *m == u32::MAX || v.abs() > z.abs() || (v.abs() == z.abs() && v < *z);
+                        if better {
+                            *z = v;
+                            *m = j;
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// The adjoint of [`max_pool`]: dx[b, arg[b, p, ch], ch] += g[b, p, ch], with `g` `[B, rows, c]`
+/// and `dx` `[B, cols, c]`.
+pub(crate) fn max_unpool<T: Real>(
+    arg: &[u32],
+    g: &[T],
+    dx: &mut [T],
+    (rows, cols): (usize, usize),
+    c: usize,
+) {
+    if c == 0 || rows == 0 || cols == 0 {
+        return;
+    }
+    dx.par_chunks_mut(cols * c)
+        .zip(g.par_chunks(rows * c).zip(arg.par_chunks(rows * c)))
+        .for_each(|(dxb, (gb, ab))| {
+            for (gp, ap) in gb.chunks_exact(c).zip(ab.chunks_exact(c)) {
+                for (ch, (&gv, &j)) in gp.iter().zip(ap).enumerate() {
+                    if j != u32::MAX {
+                        dxb[j as usize * c + ch] += gv;
+                    }
+                }
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_util::{dense_apply, random_matrix, random_vec};
+
+    #[test]
+    fn spmm_axpby_matches_dense_for_several_row_widths() {
+        let m = random_matrix(130, 170, 0.05, 1);
+        let a = Csr::from_matrix(&m);
+        for n in [1usize, 3, 9, 4] {
+            let src = random_vec(170 * n, 2);
+            let prev = random_vec(130 * n, 3);
+            let mut out = vec![0.0f64; 130 * n];
+            spmm_axpby(&a, 2.0, &src, -0.5, Some(&prev), &mut out, n);
+            let want = dense_apply(&m, &src, 1, n);
+            for (k, (&o, &w)) in out.iter().zip(&want).enumerate() {
+                assert!((o - (2.0 * w - 0.5 * prev[k])).abs() < 1e-12, "n={n} k={k}");
+            }
+            let src32: Vec<f32> = src.iter().map(|&v| v as f32).collect();
+            let mut out32 = vec![0.0f32; 130 * n];
+            spmm_axpby(&a, 1.0, &src32, 0.0, None, &mut out32, n);
+            for (&o, &w) in out32.iter().zip(&want) {
+                assert!((f64::from(o) - w).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn batch_major_product_and_channel_major_copy_match_dense() {
+        let m = random_matrix(300, 270, 0.02, 4);
+        let a = Csr::from_matrix(&m);
+        for (batch, c) in [(1usize, 3usize), (3, 9), (2, 5)] {
+            let x = random_vec(batch * 270 * c, 5);
+            let want = dense_apply(&m, &x, batch, c);
+            let y = spmm_batch_major(&a, &x, batch, c);
+            assert!(
+                y.iter().zip(&want).all(|(p, q)| (p - q).abs() < 1e-12),
+                "B={batch}"
+            );
+            // x[b, i, o] sits at cm[i, o, b].
+            let cm = to_channel_major(&x, batch, 270, c);
+            for (b, i, o) in [(0, 0, 0), (batch - 1, 7, c - 1), (batch / 2, 269, c / 2)] {
+                assert_eq!(cm[(i * c + o) * batch + b], x[(b * 270 + i) * c + o]);
+            }
+        }
+    }
+
+    #[test]
+    fn max_pool_picks_signed_largest_magnitude_and_unpool_scatters() {
+        // Clusters {0, 1}, {2, 3, 4}, {} over 5 vertices.
+        let p = CsrMatrix::from_triplets(
+            3,
+            5,
+            &[
+                (0, 0, 0.5),
+                (0, 1, 0.5),
+                (1, 2, 1.0),
+                (1, 3, 1.0),
+                (1, 4, 1.0),
+            ],
+        )
+        .unwrap();
+        let pat = Csr::from_matrix(&p);
+        // One batch, two channels.
+        let x = [1.0, -2.0, -3.0, 2.0, 0.5, 4.0, -0.5, -4.0, 0.25, 1.0f64];
+        let mut out = [9.0; 6];
+        let mut arg = [7u32; 6];
+        max_pool(&pat, &x, &mut out, &mut arg, 2);
+        // Ties in magnitude (-2 vs 2, 0.5 vs -0.5, 4 vs -4) go to the negative value.
+        assert_eq!(out, [-3.0, -2.0, -0.5, -4.0, 0.0, 0.0]);
+        assert_eq!(arg, [1, 0, 3, 3, u32::MAX, u32::MAX]);
+        let g = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        let mut dx = [0.0; 10];
+        max_unpool(&arg, &g, &mut dx, (3, 5), 2);
+        assert_eq!(dx, [0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 3.0, 4.0, 0.0, 0.0]);
+    }
+}
