@@ -1,5 +1,5 @@
 //! Placeholder until this stage's benchmark is written.
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{Criterion, criterion_group, criterion_main};
 
 fn placeholder(_c: &mut Criterion) {}
 

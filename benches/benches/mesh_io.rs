@@ -2,18 +2,22 @@
 //!
 //! `cargo bench -p meshvae-benches --bench mesh_io` (needs ../shared/datasets unpacked).
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{Criterion, criterion_group, criterion_main};
 use std::time::Duration;
 
 fn load_set(c: &mut Criterion) {
     for name in ["horse-gallop", "elephant-gallop"] {
-        let Some(dir) = mesh_io::datasets::find_or_skip(name) else { continue };
+        let Some(dir) = mesh_io::datasets::find_or_skip(name) else {
+            continue;
+        };
         let set = mesh_io::load_set(&dir).expect("data set loads").value;
         let cache = std::env::temp_dir().join(format!("bench-{name}-{}.mvset", std::process::id()));
         mesh_io::cache::write_cache(&cache, &set).expect("cache written");
 
         let mut group = c.benchmark_group(format!("load {name}"));
-        group.sample_size(10).measurement_time(Duration::from_secs(8));
+        group
+            .sample_size(10)
+            .measurement_time(Duration::from_secs(8));
         group.bench_function("obj folder", |b| {
             b.iter(|| mesh_io::load_set(&dir).expect("loads").value.len())
         });
