@@ -1,7 +1,234 @@
-//! Placeholder until this stage's benchmark is written.
-use criterion::{Criterion, criterion_group, criterion_main};
+//! spectral-conv: ChebConv (K = 3) forward and forward + backward at B = 32, C = 9 on the
+//! horse-gallop (8,431 vertices) and elephant-gallop (42,321 vertices) graphs; the sparse product
+//! as custom op against the candle-ops fallback; mean pooling and de-pooling; and a copy loop that
+//! measures the memory bandwidth the figures are compared with.
+//!
+//! `cargo bench -p meshvae-benches --bench conv` (needs ../shared/datasets unpacked).
+//! Forward + backward = forward, loss = sum(r ⊙ y) with a fixed random r, `backward()`, with both
+//! the input and the weights requiring gradients (an inner layer of a network).
+//! Pooling and de-pooling use mesh-hierarchy's operators for our pooler (modified QEM to half the
+//! vertices, mean pooling, de-pooling by copy).
 
-fn placeholder(_c: &mut Criterion) {}
+// candle allocates and frees a 50 MB tensor per op; glibc's allocator makes every op 2–3x
+// slower here, so the benches use mimalloc, as the `meshvae` binary does.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-criterion_group!(benches, placeholder);
+use candle_core::{Device, Tensor, Var};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use mesh_hierarchy::{
+    CsrMatrix, Hierarchy, HierarchyConfig, LambdaMax, adjacency, normalized_laplacian,
+    rescaled_laplacian,
+};
+use spectral_conv::{
+    Backend, ChebConv, DePool, MeanPool, SparseOp, locality_order, permute_symmetric,
+};
+use std::hint::black_box;
+use std::time::Duration;
+
+const BATCH: usize = 32;
+const CHANNELS: usize = 9;
+
+struct Graph {
+    name: String,
+    laplacian: CsrMatrix,
+    pooling: CsrMatrix,
+    depooling: CsrMatrix,
+    /// Whether to run every benchmark (false: only the custom-op ones).
+    full: bool,
+}
+
+/// The set's template graph, and (`reorder`) the same graph renumbered in
+/// `spectral_conv::locality_order` (reverse Cuthill–McKee), as a pipeline would do once.
+fn load(name: &str, reorder: bool) -> Option<Graph> {
+    let dir = mesh_io::datasets::find_or_skip(name)?;
+    // One mesh is enough for the connectivity: the first OBJ file by name.
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("data set folder")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
+        .collect();
+    files.sort();
+    let template = mesh_io::read_mesh(&files[0]).expect("template loads").value;
+    let mut adj = adjacency(template.vertex_count(), &template.faces);
+    if reorder {
+        let order = locality_order(&adj).expect("square");
+        adj = permute_symmetric(&adj, &order).expect("a permutation");
+    }
+    let laplacian = rescaled_laplacian(&normalized_laplacian(&adj), LambdaMax::Two);
+    let hierarchy = Hierarchy::build(&template, &HierarchyConfig::default()).expect("hierarchy");
+    let op = hierarchy.pooling[0].clone();
+    Some(Graph {
+        name: if reorder {
+            format!("{name}, RCM order")
+        } else {
+            name.to_string()
+        },
+        pooling: op.pool,
+        depooling: op.depool,
+        laplacian,
+        full: !reorder,
+    })
+}
+
+fn random(shape: (usize, usize, usize), seed: u64) -> Tensor {
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let n = shape.0 * shape.1 * shape.2;
+    let data: Vec<f32> = (0..n)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        })
+        .collect();
+    Tensor::from_vec(data, shape, &Device::Cpu).expect("shape fits")
+}
+
+/// Forward then backward. With `r`, through the loss sum(r ⊙ y) (candle's multiply backward
+/// also computes the unused gradient for r: about 16 extra passes over [B, V, C]); without, the
+/// gradient is seeded with ones at y (`y.backward()`): the cost of the layer alone.
+fn fwd_bwd(forward: impl Fn(&Tensor) -> Tensor, x: &Var, r: Option<&Tensor>) -> usize {
+    let y = forward(x.as_tensor());
+    let grads = match r {
+        Some(r) => (y * r).and_then(|t| t.sum_all()).and_then(|l| l.backward()),
+        None => y.backward(),
+    }
+    .expect("backward");
+    black_box(grads.get(x).map(|g| g.elem_count()).unwrap_or(0))
+}
+
+fn bandwidth(c: &mut Criterion) {
+    // Two threads copying a 48.7 MB [32, 42321, 9] f32 array: the machine's streaming bandwidth.
+    let n = BATCH * 42_321 * CHANNELS;
+    let src = vec![1.0f32; n];
+    let mut dst = vec![0.0f32; n];
+    let mut group = c.benchmark_group("bandwidth");
+    group.throughput(Throughput::Bytes((2 * n * 4) as u64));
+    group.bench_function("copy 48.7 MB, 2 threads", |b| {
+        b.iter(|| {
+            std::thread::scope(|s| {
+                for (d, a) in dst.chunks_mut(n / 2 + 1).zip(src.chunks(n / 2 + 1)) {
+                    s.spawn(move || d.copy_from_slice(a));
+                }
+            });
+            black_box(dst[n - 1])
+        })
+    });
+    group.finish();
+}
+
+fn conv(c: &mut Criterion) {
+    let cases = [
+        ("horse-gallop", false),
+        ("elephant-gallop", false),
+        ("elephant-gallop", true),
+    ];
+    for (name, reorder) in cases {
+        let Some(graph) = load(name, reorder) else {
+            continue;
+        };
+        let v = graph.laplacian.rows();
+        let op = SparseOp::new(&graph.laplacian, &Device::Cpu).expect("operator");
+        let weight = random((1, CHANNELS * 3, CHANNELS), 1)
+            .squeeze(0)
+            .expect("2-D");
+        let w = Var::from_tensor(&(weight * 0.1).expect("scaled")).expect("var");
+        let x = Var::from_tensor(&random((BATCH, v, CHANNELS), 2)).expect("var");
+        let r = random((BATCH, v, CHANNELS), 3);
+        let slow = name == "elephant-gallop";
+        let wanted = |backend: Backend, fused: bool| {
+            graph.full || (backend, fused) == (Backend::Kernel, true)
+        };
+
+        let mut group = c.benchmark_group(format!("conv {} ({v} vertices)", graph.name));
+        group
+            .sample_size(10)
+            .measurement_time(Duration::from_secs(4));
+        for (label, backend, fused) in [
+            ("fused kernel", Backend::Kernel, true),
+            ("unfused, spmm kernel", Backend::Kernel, false),
+            ("unfused, fallback", Backend::Fallback, false),
+        ] {
+            if !wanted(backend, fused) {
+                continue;
+            }
+            let conv =
+                ChebConv::from_weights(op.with_backend(backend), 3, w.as_tensor().clone(), None)
+                    .expect("layer");
+            let forward = move |t: &Tensor| {
+                if fused {
+                    conv.forward(t)
+                } else {
+                    conv.forward_unfused(t)
+                }
+                .expect("forward")
+            };
+            group.bench_function(format!("cheb K=3 fwd, {label}"), |b| {
+                b.iter(|| black_box(forward(x.as_tensor())))
+            });
+            if slow && backend == Backend::Fallback {
+                group.measurement_time(Duration::from_secs(12));
+            }
+            group.bench_function(format!("cheb K=3 fwd+bwd, {label}"), |b| {
+                b.iter(|| fwd_bwd(&forward, &x, None))
+            });
+            if fused {
+                group.bench_function(format!("cheb K=3 fwd+bwd with loss, {label}"), |b| {
+                    b.iter(|| fwd_bwd(&forward, &x, Some(&r)))
+                });
+            }
+            group.measurement_time(Duration::from_secs(4));
+        }
+        for (label, backend) in [
+            ("custom op", Backend::Kernel),
+            ("fallback", Backend::Fallback),
+        ] {
+            if !wanted(backend, true) {
+                continue;
+            }
+            let op = op.with_backend(backend);
+            let apply = move |t: &Tensor| op.apply(t).expect("product");
+            group.bench_function(format!("L x fwd, {label}"), |b| {
+                b.iter(|| black_box(apply(x.as_tensor())))
+            });
+            if slow && backend == Backend::Fallback {
+                group.measurement_time(Duration::from_secs(10));
+            }
+            group.bench_function(format!("L x fwd+bwd, {label}"), |b| {
+                b.iter(|| fwd_bwd(&apply, &x, None))
+            });
+            group.bench_function(format!("L x fwd+bwd with loss, {label}"), |b| {
+                b.iter(|| fwd_bwd(&apply, &x, Some(&r)))
+            });
+            group.measurement_time(Duration::from_secs(4));
+        }
+
+        if !graph.full {
+            group.finish();
+            continue;
+        }
+        let pool = MeanPool::new(&graph.pooling, &Device::Cpu).expect("pool");
+        let depool = DePool::new(&graph.depooling, &Device::Cpu).expect("de-pool");
+        let coarse_v = graph.pooling.rows();
+        let coarse = Var::from_tensor(&random((BATCH, coarse_v, CHANNELS), 4)).expect("var");
+        let pool_fwd = |t: &Tensor| pool.forward(t).expect("pool");
+        let depool_fwd = |t: &Tensor| depool.forward(t).expect("de-pool");
+        group.bench_function(format!("mean pool {v}->{coarse_v} fwd"), |b| {
+            b.iter(|| black_box(pool_fwd(x.as_tensor())))
+        });
+        group.bench_function(format!("mean pool {v}->{coarse_v} fwd+bwd"), |b| {
+            b.iter(|| fwd_bwd(pool_fwd, &x, None))
+        });
+        group.bench_function(format!("de-pool {coarse_v}->{v} fwd"), |b| {
+            b.iter(|| black_box(depool_fwd(coarse.as_tensor())))
+        });
+        group.bench_function(format!("de-pool {coarse_v}->{v} fwd+bwd"), |b| {
+            b.iter(|| fwd_bwd(depool_fwd, &coarse, None))
+        });
+        group.finish();
+    }
+}
+
+criterion_group!(benches, bandwidth, conv);
 criterion_main!(benches);

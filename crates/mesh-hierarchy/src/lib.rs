@@ -41,5 +41,5 @@ pub use error::HierarchyError;
 pub use file::{FORMAT, VERSION};
 pub use hierarchy::{Hierarchy, HierarchyConfig, Level};
 pub use laplacian::{LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian};
-pub use pooling::{DepoolMode, Pooler, PoolingOp, UnknownPooler};
+pub use pooling::{DepoolMode, Pooler, PoolingOp, UnknownDepoolMode, UnknownPooler};
 pub use sparse::{CsrError, CsrMatrix};

@@ -82,6 +82,32 @@ pub enum DepoolMode {
     Transpose,
 }
 
+/// Why a de-pooling mode name was not recognised.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown de-pooling mode {0:?} (expected copy or transpose)")]
+pub struct UnknownDepoolMode(pub String);
+
+impl FromStr for DepoolMode {
+    type Err = UnknownDepoolMode;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "copy" => Ok(Self::Copy),
+            "transpose" => Ok(Self::Transpose),
+            _ => Err(UnknownDepoolMode(s.to_owned())),
+        }
+    }
+}
+
+impl fmt::Display for DepoolMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Copy => "copy",
+            Self::Transpose => "transpose",
+        })
+    }
+}
+
 /// The operators from one level (fine, n vertices) to the next (coarse, m vertices).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PoolingOp {

@@ -14,15 +14,35 @@ pub(crate) const MIN_QUALITY: f64 = 0.01;
 /// weight of a face plane: it keeps boundary vertices on the boundary's course.
 pub(crate) const BOUNDARY_WEIGHT: f64 = 100.0;
 
-/// An edge's v̄ and cost terms. v̄ and the quadric error depend on the edge's ends alone; the
-/// length term on their neighbours too, and `farthest` (the neighbour at distance `longest`)
-/// lets most neighbourhood changes update it in O(1).
-#[derive(Debug, Clone, Copy, Default)]
+/// Everything kept per edge, in one record so that touching an edge costs one cache miss: v̄
+/// and the quadric error (which depend on the edge's ends alone), the length term's longest new
+/// edge as last computed and the neighbour at that distance (`u32::MAX` for none), and the
+/// contraction loop's bookkeeping. Contractions nearby that neither remove nor move `farthest`
+/// can only lengthen the longest edge, so `longest` stays a lower bound until
+/// [`State::settle`] recomputes it.
+#[derive(Debug, Clone, Copy)]
 struct Placed {
     position: Vec3,
     quadric_error: f64,
     longest: f64,
     farthest: u32,
+    /// The contraction number at which the loop last re-costed the edge.
+    visited: u32,
+    /// Whether the edge is in the loop's queue.
+    queued: bool,
+}
+
+impl Default for Placed {
+    fn default() -> Self {
+        Self {
+            position: [0.0; 3],
+            quadric_error: 0.0,
+            longest: 0.0,
+            farthest: u32::MAX,
+            visited: 0,
+            queued: true,
+        }
+    }
 }
 
 /// The mesh under simplification, in normalised coordinates (bounding-box centre at the origin,
@@ -35,20 +55,18 @@ pub(crate) struct State {
     /// against the fine face it descends from.
     original_normals: Vec<Vec3>,
     lambda: f64,
-    /// Per edge id: v̄ and the terms of its cost.
+    /// Per edge id.
     placed: Vec<Placed>,
-    ring_a: Vec<u32>,
-    ring_b: Vec<u32>,
 }
 
 impl State {
     /// Quadrics are those of Garland & Heckbert 1997: the sum of the (unweighted) planes of the
     /// faces around a vertex, plus a weighted perpendicular plane per boundary edge.
-    /// `edge_keys` are the faces' [`crate::manifold::sorted_edge_keys`].
+    /// `boundary` lists the ids of the edges with one face, ascending.
     pub(crate) fn new(
         positions: Vec<Vec3>,
         faces: &[mesh_io::Face],
-        edge_keys: &[u64],
+        boundary: &[u32],
         mesh: Connectivity,
         lambda: f64,
     ) -> Self {
@@ -71,36 +89,33 @@ impl State {
                 }
             }
         }
-        // Boundary edges: those of one face, in key order so the summation order is fixed.
-        for run in edge_keys.chunk_by(|x, y| x == y) {
-            if let [key] = run {
-                let [a, b] = crate::manifold::key_ends(*key);
-                let Some(&face) = mesh
-                    .faces_around(a)
-                    .iter()
-                    .find(|&&f| mesh.face(f).contains(&b))
-                else {
-                    continue;
-                };
-                let along = crate::geometry::sub(p(b), p(a));
-                let side = crate::geometry::cross(along, original_normals[face as usize]);
-                let len = norm(side);
-                if len > 0.0 {
-                    let q = Quadric::plane_through(p(a), scale(side, 1.0 / len), BOUNDARY_WEIGHT);
-                    quadrics[a as usize] += q;
-                    quadrics[b as usize] += q;
-                }
+        // Boundary edges in id order, so the summation order is fixed.
+        for &e in boundary {
+            let [a, b] = mesh.edge(e);
+            let Some(&face) = mesh
+                .faces_around(a)
+                .iter()
+                .find(|&&f| mesh.face(f).contains(&b))
+            else {
+                continue;
+            };
+            let along = crate::geometry::sub(p(b), p(a));
+            let side = crate::geometry::cross(along, original_normals[face as usize]);
+            let len = norm(side);
+            if len > 0.0 {
+                let q = Quadric::plane_through(p(a), scale(side, 1.0 / len), BOUNDARY_WEIGHT);
+                quadrics[a as usize] += q;
+                quadrics[b as usize] += q;
             }
         }
+        let edge_count = mesh.edge_id_count();
         Self {
-            placed: vec![Placed::default(); mesh.edge_id_count()],
+            placed: vec![Placed::default(); edge_count],
             positions,
             quadrics,
             mesh,
             original_normals,
             lambda,
-            ring_a: Vec::new(),
-            ring_b: Vec::new(),
         }
     }
 
@@ -149,49 +164,98 @@ impl State {
         } else {
             (0.0, u32::MAX)
         };
-        self.placed[e as usize] = Placed {
-            position: p,
-            quadric_error,
-            longest,
-            farthest,
-        };
+        let slot = &mut self.placed[e as usize];
+        slot.position = p;
+        slot.quadric_error = quadric_error;
+        slot.longest = longest;
+        slot.farthest = farthest;
         self.cost_of(e)
     }
 
-    /// Updates the length term of edge `e`, neither of whose ends changed, after the
-    /// contraction of (`keep`, `removed`) next to it moved `keep`: its ends' neighbours lost
-    /// `removed` and gained (or kept) `keep`, the rest stayed put. So unless the farthest
-    /// neighbour was `keep` or `removed`, the longest new edge can only grow. Returns whether the
-    /// cost may have dropped (then the queue must hear of it at once; a cost that only grew may
-    /// be corrected lazily, when the edge reaches the top).
-    pub(crate) fn update_length(&mut self, e: u32, keep: u32, removed: u32) -> bool {
-        if self.lambda == 0.0 {
-            return false;
-        }
-        let placed = self.placed[e as usize];
-        let may_drop = placed.farthest == keep || placed.farthest == removed;
-        let (longest, farthest) = if may_drop {
-            let [a, b] = self.mesh.edge(e);
-            self.longest_new_edge(a, b, placed.position)
+    /// Re-places edge `e`, one of whose ends is `keep`, after the contraction of (`keep`,
+    /// `removed`), and returns its cost with a lower bound of the length term: the distance
+    /// from the new v̄ to the old farthest neighbour, which is still a neighbour unless it was
+    /// `keep` or `removed` (then the term is measured in full). Settled at the top.
+    pub(crate) fn replace(&mut self, e: u32, keep: u32, removed: u32) -> f64 {
+        let [a, b] = self.mesh.edge(e);
+        let q = self.quadrics[a as usize] + self.quadrics[b as usize];
+        let p = self.place(&q, a, b);
+        let quadric_error = q.error(p).max(0.0);
+        let farthest = self.placed[e as usize].farthest;
+        let (longest, farthest) = if self.lambda == 0.0 {
+            (0.0, u32::MAX)
+        } else if farthest == keep || farthest == removed || farthest == u32::MAX {
+            self.longest_new_edge(a, b, p)
         } else {
-            let d = distance(placed.position, self.positions[keep as usize]);
-            if d > placed.longest {
-                (d, keep)
-            } else {
-                (placed.longest, placed.farthest)
-            }
+            (distance(p, self.positions[farthest as usize]), farthest)
         };
         let slot = &mut self.placed[e as usize];
+        slot.position = p;
+        slot.quadric_error = quadric_error;
         slot.longest = longest;
         slot.farthest = farthest;
-        may_drop
+        self.cost_of(e)
+    }
+
+    /// Whether the contraction of (`keep`, `removed`) next to edge `e` (neither of whose ends
+    /// changed) may have shortened its length term: only if it moved or removed the farthest
+    /// neighbour. Otherwise the term can only have grown, and the cached one stays a lower bound.
+    pub(crate) fn length_may_drop(&self, e: u32, keep: u32, removed: u32) -> bool {
+        let farthest = self.placed[e as usize].farthest;
+        self.lambda > 0.0 && (farthest == keep || farthest == removed)
+    }
+
+    /// Marks edge `e` visited by contraction number `step`; false if it already was.
+    pub(crate) fn visit(&mut self, e: u32, step: u32) -> bool {
+        let slot = &mut self.placed[e as usize];
+        let first = slot.visited != step;
+        slot.visited = step;
+        first
+    }
+
+    /// Whether edge `e` is in the contraction loop's queue, as last recorded.
+    pub(crate) fn queued(&self, e: u32) -> bool {
+        self.placed[e as usize].queued
+    }
+
+    /// Records whether edge `e` is in the contraction loop's queue.
+    pub(crate) fn set_queued(&mut self, e: u32, queued: bool) {
+        self.placed[e as usize].queued = queued;
+    }
+
+    /// Recomputes the length term of edge `e` for its current neighbourhood and returns its
+    /// exact cost (v̄ and the quadric error are exact since the last [`State::recost`]).
+    pub(crate) fn settle(&mut self, e: u32) -> f64 {
+        if self.lambda > 0.0 {
+            let [a, b] = self.mesh.edge(e);
+            let (longest, farthest) = self.longest_new_edge(a, b, self.placed[e as usize].position);
+            let slot = &mut self.placed[e as usize];
+            slot.longest = longest;
+            slot.farthest = farthest;
+        }
+        self.cost_of(e)
+    }
+
+    /// After a contraction moved or removed the farthest neighbour of edge `e`: the length term
+    /// may have dropped, and the distance to `keep` (now a neighbour of one of its ends) is a
+    /// lower bound of it. Returns the cost with that bound, to be settled at the top.
+    pub(crate) fn lower_length(&mut self, e: u32, keep: u32) -> f64 {
+        let d = distance(
+            self.placed[e as usize].position,
+            self.positions[keep as usize],
+        );
+        let slot = &mut self.placed[e as usize];
+        slot.longest = d;
+        slot.farthest = keep;
+        self.cost_of(e)
     }
 
     /// Eq. 1 of the paper: v̄ᵀ(Q_a + Q_b)v̄ + λ · (longest new edge from v̄ to the other
-    /// neighbours of a and b), lengths in units of the bounding-box diagonal, as cached for `e`.
+    /// neighbours of a and b), lengths in units of the bounding-box diagonal, as cached for `e`
+    /// (exact after [`State::recost`] or [`State::settle`], else a lower bound).
     pub(crate) fn cost_of(&self, e: u32) -> f64 {
-        let placed = &self.placed[e as usize];
-        placed.quadric_error + self.lambda * placed.longest
+        let slot = &self.placed[e as usize];
+        slot.quadric_error + self.lambda * slot.longest
     }
 
     /// The v̄ of edge `e` as of its last [`State::recost`].
@@ -226,10 +290,7 @@ impl State {
     /// face that survives with a moved corner, no inversion against its current normal or
     /// against the fine face it descends from, and no new sliver.
     pub(crate) fn is_valid(&mut self, a: u32, b: u32, p: Vec3) -> bool {
-        if !self
-            .mesh
-            .link_condition(a, b, &mut self.ring_a, &mut self.ring_b)
-        {
+        if !self.mesh.link_condition(a, b) {
             return false;
         }
         for (moved, other) in [(a, b), (b, a)] {
@@ -266,8 +327,8 @@ impl State {
             return false;
         }
         let q_new = triangle_quality(new[0], new[1], new[2]);
-        let q_old = triangle_quality(old[0], old[1], old[2]);
-        q_new > 0.0 && q_new >= MIN_QUALITY.min(q_old)
+        // The old quality matters only for a new sliver (it may have been one already).
+        q_new >= MIN_QUALITY || (q_new > 0.0 && q_new >= triangle_quality(old[0], old[1], old[2]))
     }
 
     /// Performs the contraction: `keep` moves to `p` and takes `remove`'s quadric, faces and
@@ -283,14 +344,12 @@ impl State {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifold::{sorted_edge_keys, vertex_faces};
-
     fn state(mesh: &mesh_io::TriMesh, lambda: f64) -> State {
         let positions: Vec<Vec3> = mesh.positions.iter().map(|&p| p.map(f64::from)).collect();
-        let keys = sorted_edge_keys(&mesh.faces);
-        let incident = vertex_faces(positions.len(), &mesh.faces);
-        let connectivity = Connectivity::from_parts(&mesh.faces, &keys, incident);
-        State::new(positions, &mesh.faces, &keys, connectivity, lambda)
+        let topology = crate::manifold::topology(positions.len(), &mesh.faces).expect("manifold");
+        let boundary = topology.boundary.clone();
+        let connectivity = Connectivity::from_topology(&mesh.faces, topology);
+        State::new(positions, &mesh.faces, &boundary, connectivity, lambda)
     }
 
     /// The quadric of vertex v from scratch as a dense 4×4 matrix: Σ p pᵀ over its faces' planes.

@@ -5,6 +5,8 @@
 //! Faces are never created: a face of the coarse mesh is a fine face whose corners were
 //! relabelled, which is what lets every coarse face name the fine face it descends from.
 
+use crate::lists::Lists;
+use crate::manifold::Topology;
 use mesh_io::Face;
 
 /// Faces, edges and vertex incidence of a manifold mesh under edge contraction.
@@ -13,12 +15,18 @@ pub(crate) struct Connectivity {
     faces: Vec<Face>,
     face_alive: Vec<bool>,
     /// The live faces around each vertex (empty for removed or unused vertices).
-    incident: Vec<Vec<u32>>,
+    incident: Lists<u32>,
     /// Edge id → its endpoints (lower first). Ids are those of the sorted initial edge list;
     /// an edge keeps its id when an endpoint is relabelled.
     edges: Vec<[u32; 2]>,
     /// The live edges at each vertex, with their other ends.
-    vertex_edges: Vec<Vec<Spoke>>,
+    vertex_edges: Lists<Spoke>,
+    /// Scratch for the link condition: `mark[w] == stamp` for the neighbours of one vertex.
+    mark: Vec<u32>,
+    stamp: u32,
+    /// Scratch for [`Connectivity::collapse`].
+    scratch_spokes: Vec<Spoke>,
+    scratch_faces: Vec<u32>,
 }
 
 /// An edge seen from one of its ends: its id and its other end.
@@ -29,42 +37,54 @@ pub(crate) struct Spoke {
 }
 
 impl Connectivity {
-    /// `faces` must index below `vertex_count` (checked by the caller).
+    /// `faces` must index below `vertex_count` and form a 2-manifold.
     #[cfg(test)]
     pub(crate) fn new(vertex_count: usize, faces: &[Face]) -> Self {
-        use crate::manifold::{sorted_edge_keys, vertex_faces};
-        Self::from_parts(
-            faces,
-            &sorted_edge_keys(faces),
-            vertex_faces(vertex_count, faces),
-        )
+        match crate::manifold::topology(vertex_count, faces) {
+            Ok(topology) => Self::from_topology(faces, topology),
+            Err(defect) => panic!("test mesh is not a manifold: {defect}"),
+        }
     }
 
-    /// From the faces, their [`crate::manifold::sorted_edge_keys`] and
-    /// [`crate::manifold::vertex_faces`].
-    pub(crate) fn from_parts(faces: &[Face], edge_keys: &[u64], incident: Vec<Vec<u32>>) -> Self {
-        let mut edges: Vec<[u32; 2]> = Vec::with_capacity(edge_keys.len() / 2 + 1);
-        let mut last = None;
-        for &key in edge_keys {
-            if last != Some(key) {
-                edges.push(crate::manifold::key_ends(key));
-                last = Some(key);
-            }
+    /// From the faces and their [`crate::manifold::topology`].
+    pub(crate) fn from_topology(faces: &[Face], topology: Topology) -> Self {
+        let Topology {
+            incident, edges, ..
+        } = topology;
+        // Each vertex's spokes in edge id order, gathered in one list first.
+        let n = incident.len();
+        let mut offsets = vec![0u32; n + 1];
+        for &[a, b] in &edges {
+            offsets[a as usize + 1] += 1;
+            offsets[b as usize + 1] += 1;
         }
-        let mut vertex_edges: Vec<Vec<Spoke>> = incident
-            .iter()
-            .map(|faces| Vec::with_capacity(faces.len() + 1))
-            .collect();
+        for v in 0..n {
+            offsets[v + 1] += offsets[v];
+        }
+        let mut cursor = offsets.clone();
+        let mut spokes = vec![Spoke { edge: 0, to: 0 }; offsets[n] as usize];
         for (e, &[a, b]) in edges.iter().enumerate() {
             let edge = e as u32;
-            vertex_edges[a as usize].push(Spoke { edge, to: b });
-            vertex_edges[b as usize].push(Spoke { edge, to: a });
+            spokes[cursor[a as usize] as usize] = Spoke { edge, to: b };
+            cursor[a as usize] += 1;
+            spokes[cursor[b as usize] as usize] = Spoke { edge, to: a };
+            cursor[b as usize] += 1;
         }
+        let vertex_edges = Lists::from_lists(
+            offsets
+                .windows(2)
+                .map(|w| &spokes[w[0] as usize..w[1] as usize]),
+            crate::manifold::SLACK,
+        );
         Self {
             faces: faces.to_vec(),
             face_alive: vec![true; faces.len()],
             incident,
             edges,
+            mark: vec![0; n],
+            stamp: 0,
+            scratch_spokes: Vec::new(),
+            scratch_faces: Vec::new(),
             vertex_edges,
         }
     }
@@ -81,7 +101,7 @@ impl Connectivity {
 
     /// The live edges at `v`.
     pub(crate) fn edges_around(&self, v: u32) -> &[Spoke] {
-        &self.vertex_edges[v as usize]
+        self.vertex_edges.get(v)
     }
 
     pub(crate) fn face(&self, f: u32) -> Face {
@@ -89,7 +109,7 @@ impl Connectivity {
     }
 
     pub(crate) fn faces_around(&self, v: u32) -> &[u32] {
-        &self.incident[v as usize]
+        self.incident.get(v)
     }
 
     /// The live faces with their index, in ascending original order.
@@ -102,33 +122,32 @@ impl Connectivity {
             .map(|(i, (f, _))| (i, *f))
     }
 
-    /// Every corner of the faces around `v` other than `v` itself, sorted, with repeats: an
-    /// interior edge (v, w) puts w in twice, a boundary edge once.
-    pub(crate) fn ring_with_counts(&self, v: u32, out: &mut Vec<u32>) {
-        out.clear();
-        for &f in self.faces_around(v) {
-            out.extend(self.faces[f as usize].into_iter().filter(|&w| w != v));
-        }
-        out.sort_unstable();
-    }
-
     /// The distinct neighbours of `v`, sorted.
     #[cfg(test)]
     pub(crate) fn neighbours(&self, v: u32, out: &mut Vec<u32>) {
-        self.ring_with_counts(v, out);
-        out.dedup();
+        out.clear();
+        out.extend(self.edges_around(v).iter().map(|s| s.to));
+        out.sort_unstable();
+    }
+
+    /// How many live faces hold both `v` and `w`.
+    fn faces_of_edge(&self, v: u32, w: u32) -> usize {
+        self.faces_around(v)
+            .iter()
+            .filter(|&&f| self.faces[f as usize].contains(&w))
+            .count()
+    }
+
+    /// Whether `v` lies on the boundary. The mesh stays a 2-manifold, so the faces around `v`
+    /// are one fan: a closed one has as many edges as faces, an open one one edge more.
+    fn on_boundary(&self, v: u32) -> bool {
+        self.edges_around(v).len() > self.faces_around(v).len()
     }
 
     /// Whether contracting edge (a, b) keeps a 2-manifold of the same topology: the link
     /// condition Lk(a) ∩ Lk(b) = Lk(ab), with boundaries closed by a virtual vertex joined to
-    /// every boundary vertex. `ra`/`rb` are scratch buffers. False when (a, b) is no edge.
-    pub(crate) fn link_condition(
-        &self,
-        a: u32,
-        b: u32,
-        ra: &mut Vec<u32>,
-        rb: &mut Vec<u32>,
-    ) -> bool {
+    /// every boundary vertex. False when (a, b) is no edge.
+    pub(crate) fn link_condition(&mut self, a: u32, b: u32) -> bool {
         // Vertices opposite the edge (the third corners of the faces that hold it).
         let mut opposite = [u32::MAX; 2];
         let mut shared = 0usize;
@@ -145,37 +164,28 @@ impl Connectivity {
         if shared == 0 {
             return false;
         }
-        self.ring_with_counts(a, ra);
-        self.ring_with_counts(b, rb);
         // Common neighbours must be exactly the opposite vertices.
-        let mut common = 0usize;
-        let (mut i, mut j) = (0, 0);
-        while i < ra.len() && j < rb.len() {
-            match ra[i].cmp(&rb[j]) {
-                std::cmp::Ordering::Less => i += 1,
-                std::cmp::Ordering::Greater => j += 1,
-                std::cmp::Ordering::Equal => {
-                    let w = ra[i];
-                    if w != a && w != b {
-                        common += 1;
-                    }
-                    while i < ra.len() && ra[i] == w {
-                        i += 1;
-                    }
-                    while j < rb.len() && rb[j] == w {
-                        j += 1;
-                    }
-                }
-            }
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.mark.fill(0);
+            self.stamp = 1;
         }
+        let stamp = self.stamp;
+        for s in self.vertex_edges.get(a) {
+            self.mark[s.to as usize] = stamp;
+        }
+        let common = self
+            .vertex_edges
+            .get(b)
+            .iter()
+            .filter(|s| self.mark[s.to as usize] == stamp)
+            .count();
         if common != shared {
             return false;
         }
-        let boundary_edge = |ring: &[u32], w: u32| ring.iter().filter(|&&x| x == w).count() == 1;
-        let boundary_vertex = |ring: &[u32]| ring.chunk_by(|x, y| x == y).any(|r| r.len() == 1);
         if shared == 2 {
             // An interior edge joining two boundary vertices would pinch the surface.
-            if boundary_vertex(ra) && boundary_vertex(rb) {
+            if self.on_boundary(a) && self.on_boundary(b) {
                 return false;
             }
             // Both (a, c, d) and (b, c, d) exist: the edge is in a tetrahedron.
@@ -192,7 +202,7 @@ impl Connectivity {
         } else {
             // A lone triangle whose three edges are all boundary would collapse to an edge.
             let c = opposite[0];
-            if boundary_edge(ra, c) && boundary_edge(rb, c) {
+            if self.faces_of_edge(a, c) == 1 && self.faces_of_edge(b, c) == 1 {
                 return false;
             }
         }
@@ -204,39 +214,42 @@ impl Connectivity {
     /// one of `keep`'s die, their ids pushed to `dead_edges`. The caller has checked the link
     /// condition.
     pub(crate) fn collapse(&mut self, keep: u32, remove: u32, dead_edges: &mut Vec<u32>) {
-        let moved = std::mem::take(&mut self.vertex_edges[remove as usize]);
-        self.vertex_edges[keep as usize].retain(|s| s.to != remove);
+        let mut moved = std::mem::take(&mut self.scratch_spokes);
+        self.vertex_edges.take_into(remove, &mut moved);
+        self.vertex_edges.retain(keep, |s| s.to != remove);
         // `keep`'s own edges, before it takes any of `remove`'s.
-        let kept = self.vertex_edges[keep as usize].len();
-        for Spoke { edge, to: x } in moved {
+        let kept = self.vertex_edges.get(keep).len();
+        for &Spoke { edge, to: x } in &moved {
             if x == keep {
                 dead_edges.push(edge);
                 continue;
             }
-            let duplicate = self.vertex_edges[keep as usize][..kept]
+            let duplicate = self.vertex_edges.get(keep)[..kept]
                 .iter()
                 .any(|s| s.to == x);
             if duplicate {
                 dead_edges.push(edge);
-                self.vertex_edges[x as usize].retain(|s| s.edge != edge);
+                self.vertex_edges.retain(x, |s| s.edge != edge);
             } else {
                 self.edges[edge as usize] = [keep.min(x), keep.max(x)];
-                self.vertex_edges[keep as usize].push(Spoke { edge, to: x });
-                for s in &mut self.vertex_edges[x as usize] {
+                self.vertex_edges.push(keep, Spoke { edge, to: x });
+                for s in self.vertex_edges.get_mut(x) {
                     if s.edge == edge {
                         s.to = keep;
                     }
                 }
             }
         }
-        let moved = std::mem::take(&mut self.incident[remove as usize]);
-        for f in moved {
+        self.scratch_spokes = moved;
+        let mut moved = std::mem::take(&mut self.scratch_faces);
+        self.incident.take_into(remove, &mut moved);
+        for &f in &moved {
             let face = &mut self.faces[f as usize];
             if face.contains(&keep) {
                 self.face_alive[f as usize] = false;
                 for w in *face {
                     if w != keep && w != remove {
-                        self.incident[w as usize].retain(|&g| g != f);
+                        self.incident.retain(w, |&g| g != f);
                     }
                 }
             } else {
@@ -245,11 +258,12 @@ impl Connectivity {
                         *corner = keep;
                     }
                 }
-                self.incident[keep as usize].push(f);
+                self.incident.push(keep, f);
             }
         }
+        self.scratch_faces = moved;
         let alive = &self.face_alive;
-        self.incident[keep as usize].retain(|&f| alive[f as usize]);
+        self.incident.retain(keep, |&f| alive[f as usize]);
     }
 }
 
@@ -273,14 +287,13 @@ mod tests {
 
     #[test]
     fn octahedron_edges_pass_and_a_tetrahedron_edge_fails() {
-        let (mut ra, mut rb) = (Vec::new(), Vec::new());
-        let c = Connectivity::new(6, &octahedron());
-        assert!(c.link_condition(0, 2, &mut ra, &mut rb));
-        assert!(c.link_condition(4, 1, &mut ra, &mut rb));
+        let mut c = Connectivity::new(6, &octahedron());
+        assert!(c.link_condition(0, 2));
+        assert!(c.link_condition(4, 1));
         // 0 and 1 are opposite: not an edge.
-        assert!(!c.link_condition(0, 1, &mut ra, &mut rb));
-        let tetra = Connectivity::new(4, &[[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]]);
-        assert!(!tetra.link_condition(0, 1, &mut ra, &mut rb));
+        assert!(!c.link_condition(0, 1));
+        let mut tetra = Connectivity::new(4, &[[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]]);
+        assert!(!tetra.link_condition(0, 1));
     }
 
     #[test]
@@ -300,8 +313,7 @@ mod tests {
         assert_eq!(n, vec![1, 3, 4, 5]);
         // Now the mesh is a square pyramid pair around 0,1,3: vertex 0 has valence 4, and edge
         // (0, 1) has three common neighbours (3, 4, 5) but only two opposite vertices.
-        let (mut ra, mut rb) = (Vec::new(), Vec::new());
-        assert!(!c.link_condition(0, 1, &mut ra, &mut rb));
+        assert!(!c.link_condition(0, 1));
     }
 
     /// The live edge table equals the edges of the live faces, and every vertex lists its own.
@@ -332,16 +344,14 @@ mod tests {
         let sphere = crate::shapes::icosphere(2);
         let n = sphere.vertex_count() as u32;
         let mut c = Connectivity::new(sphere.vertex_count(), &sphere.faces);
-        let (mut ra, mut rb, mut dead) = (Vec::new(), Vec::new(), Vec::new());
+        let mut dead = Vec::new();
         let mut done = 0;
         for e in 0..c.edge_id_count() as u32 {
             if done == 40 {
                 break;
             }
             let [a, b] = c.edge(e);
-            if c.edges_around(a).iter().any(|s| s.edge == e)
-                && c.link_condition(a, b, &mut ra, &mut rb)
-            {
+            if c.edges_around(a).iter().any(|s| s.edge == e) && c.link_condition(a, b) {
                 c.collapse(a, b, &mut dead);
                 done += 1;
                 assert_edges_match_faces(&c, n);
@@ -352,14 +362,13 @@ mod tests {
 
     #[test]
     fn boundary_rules() {
-        let (mut ra, mut rb) = (Vec::new(), Vec::new());
         // A lone triangle cannot lose an edge.
-        let tri = Connectivity::new(3, &[[0, 1, 2]]);
-        assert!(!tri.link_condition(0, 1, &mut ra, &mut rb));
+        let mut tri = Connectivity::new(3, &[[0, 1, 2]]);
+        assert!(!tri.link_condition(0, 1));
         // A strip 0-1-2 / 3-4-5 of four triangles: the interior edge (1, 4) joins two boundary
         // vertices and must not be contracted; the boundary edge (0, 1) may be.
-        let strip = Connectivity::new(6, &[[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]]);
-        assert!(!strip.link_condition(1, 4, &mut ra, &mut rb));
-        assert!(strip.link_condition(0, 1, &mut ra, &mut rb));
+        let mut strip = Connectivity::new(6, &[[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]]);
+        assert!(!strip.link_condition(1, 4));
+        assert!(strip.link_condition(0, 1));
     }
 }

@@ -51,6 +51,7 @@ mod error;
 mod geometry;
 mod grid;
 mod heap;
+mod lists;
 pub mod manifold;
 pub mod quadric;
 mod report;

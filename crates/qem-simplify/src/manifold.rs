@@ -1,6 +1,7 @@
 //! Is a face list a 2-manifold (with or without boundary)? Used to reject bad input and to
 //! report on the output.
 
+use crate::lists::Lists;
 use mesh_io::Face;
 
 /// The first reason a face list is not a 2-manifold.
@@ -35,139 +36,151 @@ impl std::fmt::Display for ManifoldDefect {
 /// `None` when `faces` (indices below `vertex_count`) form a 2-manifold: no face repeats a
 /// vertex, every edge has one or two faces, and the faces around every vertex are one fan.
 pub fn manifold_defect(vertex_count: usize, faces: &[Face]) -> Option<ManifoldDefect> {
-    defect_of(
-        faces,
-        &sorted_edge_keys(faces),
-        &vertex_faces(vertex_count, faces),
-    )
+    topology(vertex_count, faces).err()
 }
 
-/// [`manifold_defect`] from the precomputed [`sorted_edge_keys`] and [`vertex_faces`].
-pub(crate) fn defect_of(
+/// Room for this many more items in each vertex's list of faces and of edges: merges add a
+/// few, and the room saves moving the list.
+pub(crate) const SLACK: usize = 4;
+
+/// The edges and vertex incidence of a 2-manifold face list.
+pub(crate) struct Topology {
+    /// The faces around each vertex, in ascending face order.
+    pub(crate) incident: Lists<u32>,
+    /// The distinct edges, lower end first, in ascending order: the index is the edge id.
+    pub(crate) edges: Vec<[u32; 2]>,
+    /// The ids of the edges with a single face (ascending).
+    pub(crate) boundary: Vec<u32>,
+}
+
+/// The [`Topology`] of `faces` (indices below `vertex_count`, checked by the caller), or the
+/// first [`ManifoldDefect`]: a repeated vertex (lowest face), else an overused edge (lowest
+/// edge), else a pinched vertex (lowest vertex). One pass over each vertex's faces, O(F).
+pub(crate) fn topology(
+    vertex_count: usize,
     faces: &[Face],
-    edge_keys: &[u64],
-    incident: &[Vec<u32>],
-) -> Option<ManifoldDefect> {
+) -> std::result::Result<Topology, ManifoldDefect> {
     if let Some(face) = faces
         .iter()
         .position(|f| f[0] == f[1] || f[1] == f[2] || f[2] == f[0])
     {
-        return Some(ManifoldDefect::RepeatedVertex { face });
+        return Err(ManifoldDefect::RepeatedVertex { face });
     }
-    if let Some(run) = edge_keys.chunk_by(|x, y| x == y).find(|run| run.len() > 2) {
-        let [a, b] = key_ends(run[0]);
-        return Some(ManifoldDefect::EdgeOverused {
-            a,
-            b,
-            faces: run.len(),
-        });
-    }
-    let (mut neighbours, mut parent) = (Vec::new(), Vec::new());
-    for (vertex, around) in incident.iter().enumerate() {
-        let fans = count_fans(vertex as u32, around, faces, &mut neighbours, &mut parent);
-        if fans > 1 {
-            return Some(ManifoldDefect::VertexNotFan {
-                vertex: vertex as u32,
-                fans,
-            });
+    let (offsets, around_all) = vertex_faces(vertex_count, faces);
+    let mut edges = Vec::with_capacity(faces.len() * 3 / 2 + 2);
+    let mut boundary = Vec::new();
+    let mut pinched = None;
+    // Per vertex v: its distinct neighbours w, each with a face holding edge (v, w) and how many
+    // do (`slot[w]` finds w's entry while `slot[w].0 == v`), and a union-find over v's faces
+    // joining those that share an edge at v.
+    let mut slot = vec![(u32::MAX, 0u32); vertex_count];
+    let mut local: Vec<(u32, u32, u32)> = Vec::new();
+    let mut higher: Vec<(u32, u32)> = Vec::new();
+    let mut parent = Vec::<u32>::new();
+    for (v, span) in offsets.windows(2).enumerate() {
+        let around = &around_all[span[0] as usize..span[1] as usize];
+        let v32 = v as u32;
+        local.clear();
+        parent.clear();
+        parent.extend(0..around.len() as u32);
+        let mut fans = around.len();
+        for (here, &f) in around.iter().enumerate() {
+            for w in faces[f as usize] {
+                let Some(entry) = slot.get_mut(w as usize).filter(|_| w != v32) else {
+                    continue;
+                };
+                if entry.0 == v32 {
+                    let seen = &mut local[entry.1 as usize];
+                    seen.2 += 1;
+                    let (rx, ry) = (root(&mut parent, seen.1), root(&mut parent, here as u32));
+                    if rx != ry {
+                        parent[rx as usize] = ry;
+                        fans -= 1;
+                    }
+                } else {
+                    *entry = (v32, local.len() as u32);
+                    local.push((w, here as u32, 1));
+                }
+            }
+        }
+        // Each edge is met from both ends; it is judged at its lower one, in edge order.
+        higher.clear();
+        higher.extend(
+            local
+                .iter()
+                .filter(|&&(w, _, _)| w > v32)
+                .map(|&(w, _, count)| (w, count)),
+        );
+        higher.sort_unstable();
+        for &(w, count) in &higher {
+            if count > 2 {
+                return Err(ManifoldDefect::EdgeOverused {
+                    a: v32,
+                    b: w,
+                    faces: count as usize,
+                });
+            }
+            if count == 1 {
+                boundary.push(edges.len() as u32);
+            }
+            edges.push([v32, w]);
+        }
+        // Faces sharing an edge at v are one fan; reported once no edge is overused.
+        if fans > 1 && pinched.is_none() {
+            pinched = Some(ManifoldDefect::VertexNotFan { vertex: v32, fans });
         }
     }
-    None
+    match pinched {
+        Some(defect) => Err(defect),
+        None => Ok(Topology {
+            incident: Lists::from_lists(
+                offsets
+                    .windows(2)
+                    .map(|w| &around_all[w[0] as usize..w[1] as usize]),
+                SLACK,
+            ),
+            edges,
+            boundary,
+        }),
+    }
 }
 
-/// An undirected edge as one sortable number: lower end in the high half.
-pub(crate) fn edge_key(a: u32, b: u32) -> u64 {
-    (u64::from(a.min(b)) << 32) | u64::from(a.max(b))
+fn root(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
 }
 
-/// The ends of an [`edge_key`], lower first.
-pub(crate) fn key_ends(key: u64) -> [u32; 2] {
-    [(key >> 32) as u32, key as u32]
-}
-
-/// Every face side as an [`edge_key`], sorted: an interior edge appears twice, a boundary edge
-/// once.
-pub(crate) fn sorted_edge_keys(faces: &[Face]) -> Vec<u64> {
-    let mut keys: Vec<u64> = faces
-        .iter()
-        .flat_map(|f| {
-            [
-                edge_key(f[0], f[1]),
-                edge_key(f[1], f[2]),
-                edge_key(f[2], f[0]),
-            ]
-        })
-        .collect();
-    keys.sort_unstable();
-    keys
-}
-
-/// The faces incident to each vertex, in ascending face order. Indices at or past
-/// `vertex_count` are ignored.
-pub(crate) fn vertex_faces(vertex_count: usize, faces: &[Face]) -> Vec<Vec<u32>> {
-    let mut degree = vec![0usize; vertex_count];
+/// The faces incident to each vertex, in ascending face order, as offsets (one per vertex,
+/// plus one) into one list. Indices at or past `vertex_count` are ignored.
+fn vertex_faces(vertex_count: usize, faces: &[Face]) -> (Vec<u32>, Vec<u32>) {
+    let mut offsets = vec![0u32; vertex_count + 1];
     for f in faces {
         for &v in f {
-            if let Some(d) = degree.get_mut(v as usize) {
+            if let Some(d) = offsets.get_mut(v as usize + 1) {
                 *d += 1;
             }
         }
     }
-    let mut incident: Vec<Vec<u32>> = degree.into_iter().map(Vec::with_capacity).collect();
+    for v in 0..vertex_count {
+        offsets[v + 1] += offsets[v];
+    }
+    let mut cursor = offsets.clone();
+    let mut items = vec![0u32; offsets[vertex_count] as usize];
     for (i, f) in faces.iter().enumerate() {
         for &v in f {
-            if let Some(list) = incident.get_mut(v as usize) {
-                list.push(i as u32);
+            if let Some(c) = cursor
+                .get_mut(v as usize)
+                .filter(|_| (v as usize) < vertex_count)
+            {
+                items[*c as usize] = i as u32;
+                *c += 1;
             }
         }
     }
-    incident
-}
-
-/// Fans around `vertex`: components of the graph on its neighbours in which each face around it
-/// joins its two other corners (faces sharing an edge at `vertex` share a neighbour).
-fn count_fans(
-    vertex: u32,
-    around: &[u32],
-    faces: &[Face],
-    neighbours: &mut Vec<u32>,
-    parent: &mut Vec<usize>,
-) -> usize {
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
-    let others = |f: u32| {
-        let face = faces[f as usize];
-        let mut it = face.into_iter().filter(move |&w| w != vertex);
-        [it.next().unwrap_or(vertex), it.next().unwrap_or(vertex)]
-    };
-    // Valences are small: linear scans beat sorting here.
-    neighbours.clear();
-    for w in around.iter().flat_map(|&f| others(f)) {
-        if !neighbours.contains(&w) {
-            neighbours.push(w);
-        }
-    }
-    parent.clear();
-    parent.extend(0..neighbours.len());
-    let mut fans = neighbours.len();
-    for &f in around {
-        let [a, b] = others(f);
-        let position = |x: u32| neighbours.iter().position(|&w| w == x);
-        let (Some(i), Some(j)) = (position(a), position(b)) else {
-            continue;
-        };
-        let (ri, rj) = (root(parent, i), root(parent, j));
-        if ri != rj {
-            parent[ri] = rj;
-            fans -= 1;
-        }
-    }
-    fans
+    (offsets, items)
 }
 
 #[cfg(test)]
@@ -201,6 +214,71 @@ mod tests {
         let bow_tie = [[0, 1, 2], [0, 3, 4]];
         assert_eq!(
             manifold_defect(5, &bow_tie),
+            Some(ManifoldDefect::VertexNotFan { vertex: 0, fans: 2 })
+        );
+    }
+
+    #[test]
+    fn topology_lists_every_edge_once_in_order_and_the_boundary_ones() {
+        for mesh in [
+            crate::shapes::icosphere(2),
+            crate::shapes::torus(9, 5, 1.0, 0.3),
+            crate::shapes::bumpy_grid(7, 5),
+        ] {
+            let t = topology(mesh.vertex_count(), &mesh.faces).expect("manifold");
+            // Brute force: every face side, sorted; runs of one are boundary edges.
+            let mut sides: Vec<[u32; 2]> = mesh
+                .faces
+                .iter()
+                .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
+                .map(|[a, b]| [a.min(b), a.max(b)])
+                .collect();
+            sides.sort_unstable();
+            let runs: Vec<&[[u32; 2]]> = sides.chunk_by(|x, y| x == y).collect();
+            let edges: Vec<[u32; 2]> = runs.iter().map(|r| r[0]).collect();
+            let boundary: Vec<u32> = (0..runs.len() as u32)
+                .filter(|&e| runs[e as usize].len() == 1)
+                .collect();
+            assert_eq!(t.edges, edges);
+            assert_eq!(t.boundary, boundary);
+            for v in 0..mesh.vertex_count() as u32 {
+                let around: Vec<u32> = (0..mesh.faces.len() as u32)
+                    .filter(|&f| mesh.faces[f as usize].contains(&v))
+                    .collect();
+                assert_eq!(t.incident.get(v), around.as_slice());
+            }
+        }
+        assert!(
+            !topology(16, &crate::shapes::bumpy_grid(3, 3).faces)
+                .expect("manifold")
+                .boundary
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn an_overused_edge_is_reported_before_a_lower_pinched_vertex() {
+        // Vertex 0 is pinched (two separate triangles), edge (5, 6) has three faces.
+        let faces = [[0, 1, 2], [0, 3, 4], [5, 6, 7], [6, 5, 8], [5, 6, 9]];
+        assert_eq!(
+            manifold_defect(10, &faces),
+            Some(ManifoldDefect::EdgeOverused {
+                a: 5,
+                b: 6,
+                faces: 3
+            })
+        );
+        // Two fans touching at 0, each closed around it: still two fans.
+        let double_cone = [
+            [0, 1, 2],
+            [0, 2, 3],
+            [0, 3, 1],
+            [0, 4, 5],
+            [0, 5, 6],
+            [0, 6, 4],
+        ];
+        assert_eq!(
+            manifold_defect(7, &double_cone),
             Some(ManifoldDefect::VertexNotFan { vertex: 0, fans: 2 })
         );
     }

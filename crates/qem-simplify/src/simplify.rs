@@ -5,7 +5,7 @@ use crate::connectivity::Connectivity;
 use crate::error::{Result, SimplifyError};
 use crate::geometry::{Vec3, scale, sub, to_f64};
 use crate::heap::EdgeQueue;
-use crate::manifold::{defect_of, sorted_edge_keys, vertex_faces};
+use crate::manifold::topology;
 use mesh_io::{Face, Point, TriMesh};
 
 /// The paper's weight of the edge-length term, for lengths measured on the mesh scaled to a
@@ -120,11 +120,7 @@ pub fn simplify(mesh: &TriMesh, config: &SimplifyConfig) -> Result<Simplified> {
     }
     let n = mesh.vertex_count();
     let target = config.target.resolve(n)?;
-    let edge_keys = sorted_edge_keys(&mesh.faces);
-    let incident = vertex_faces(n, &mesh.faces);
-    if let Some(defect) = defect_of(&mesh.faces, &edge_keys, &incident) {
-        return Err(SimplifyError::NonManifold(defect));
-    }
+    let mut topology = topology(n, &mesh.faces).map_err(SimplifyError::NonManifold)?;
     let (center, diagonal) = frame(&mesh.positions);
     if diagonal <= 0.0 {
         return Err(SimplifyError::ZeroExtent { vertices: n });
@@ -134,11 +130,12 @@ pub fn simplify(mesh: &TriMesh, config: &SimplifyConfig) -> Result<Simplified> {
         .iter()
         .map(|&p| scale(sub(to_f64(p), center), 1.0 / diagonal))
         .collect();
-    let connectivity = Connectivity::from_parts(&mesh.faces, &edge_keys, incident);
+    let boundary = std::mem::take(&mut topology.boundary);
+    let connectivity = Connectivity::from_topology(&mesh.faces, topology);
     let mut state = State::new(
         normalised,
         &mesh.faces,
-        &edge_keys,
+        &boundary,
         connectivity,
         config.lambda,
     );
@@ -164,35 +161,36 @@ fn contract_to(state: &mut State, target: usize) -> Result<Vec<u32>> {
     let mut parent: Vec<u32> = (0..n as u32).collect();
     let edge_count = state.mesh.edge_id_count();
     let costs: Vec<f64> = (0..edge_count as u32).map(|e| state.recost(e)).collect();
-    // Invariant: every queued edge's key is at most its true cost (`State::cost_of`). Costs that
-    // drop are pushed at once; costs that grow are corrected when they reach the top. So the
-    // edge popped with key = true cost is the cheapest of all: the greedy order is exact.
+    // Invariant: every queued edge's key is at most its true cost. Costs that may drop are
+    // pushed at once; costs that can only grow (a length term whose farthest neighbour stayed
+    // put) are left as they are and settled when they reach the top. So the edge at the top
+    // with key = true cost is the cheapest of all: the greedy order is exact.
     let mut queue = EdgeQueue::from_costs(costs);
-    // The contraction number at which each edge was last re-costed, to cost it once per step.
-    let mut costed = vec![0usize; edge_count];
     let mut remaining = n;
     let (mut ring, mut dead) = (Vec::new(), Vec::new());
-    let mut step = 0usize;
+    let mut step = 0u32;
     while remaining > target {
-        let Some((edge, key)) = queue.pop() else {
+        let Some((edge, key)) = queue.peek() else {
             return Err(SimplifyError::TargetUnreachable {
                 target,
                 reached: remaining,
             });
         };
-        let cost = state.cost_of(edge);
+        let cost = state.settle(edge);
         debug_assert!(
             cost.total_cmp(&key).is_ge(),
             "a queued key above its true cost"
         );
         if cost.total_cmp(&key).is_gt() {
-            queue.set(edge, cost);
+            queue.raise_top(cost);
             continue;
         }
+        queue.pop();
         let [keep, remove] = state.mesh.edge(edge);
         let p = state.placed(edge);
         if !state.is_valid(keep, remove, p) {
             // Out of the queue until a contraction nearby re-costs it.
+            state.set_queued(edge, false);
             continue;
         }
         dead.clear();
@@ -203,25 +201,32 @@ fn contract_to(state: &mut State, target: usize) -> Result<Vec<u32>> {
         parent[remove as usize] = keep;
         remaining -= 1;
         step += 1;
-        // The edges at `keep` need a new v̄; the other edges of its neighbours a new length
-        // term. Either may have become valid again: all go (back) into the queue.
+        // The edges at `keep` need a new v̄; the other edges of its neighbours may have a
+        // shorter length term (then re-measured now) or a longer one (settled at the top).
+        // Either may have become valid again: all go (back) into the queue.
         ring.clear();
         for i in 0..state.mesh.edges_around(keep).len() {
             let spoke = state.mesh.edges_around(keep)[i];
-            costed[spoke.edge as usize] = step;
+            state.visit(spoke.edge, step);
             ring.push(spoke.to);
-            let cost = state.recost(spoke.edge);
+            let cost = state.replace(spoke.edge, keep, remove);
             queue.set(spoke.edge, cost);
+            state.set_queued(spoke.edge, true);
         }
         for &w in &ring {
             for i in 0..state.mesh.edges_around(w).len() {
                 let e = state.mesh.edges_around(w)[i].edge;
-                if costed[e as usize] != step {
-                    costed[e as usize] = step;
-                    let may_drop = state.update_length(e, keep, remove);
-                    if may_drop || !queue.contains(e) {
+                if state.visit(e, step) {
+                    debug_assert_eq!(state.queued(e), queue.contains(e));
+                    if state.length_may_drop(e, keep, remove) {
+                        let cost = state.lower_length(e, keep);
+                        queue.set(e, cost);
+                    } else if !state.queued(e) {
                         queue.set(e, state.cost_of(e));
+                    } else {
+                        continue;
                     }
+                    state.set_queued(e, true);
                 }
             }
         }

@@ -1,4 +1,65 @@
-//! # spectral-conv: Chebyshev graph convolution and pooling as candle ops
+//! # spectral-conv: graph convolution and pooling on meshes as candle ops
 //!
-//! Not built yet (issue "spectral-conv"). In: sparse operators from `mesh-hierarchy`. Out: candle
-//! modules (ChebConv, SpatialConv, pooling) with fast CPU kernels and gradients.
+//! **In:** fixed sparse operators from `mesh-hierarchy` ([`CsrMatrix`]: a rescaled Laplacian
+//! L̃, pooling, de-pooling or sampling matrices) and batches of per-vertex features as candle
+//! tensors `[B, V, C]` (or `[V, C]`), f32 or f64.
+//! **Out:** differentiable layers: [`SparseOp`] (y = A x), [`ChebConv`]
+//! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`MeanPool`],
+//! [`DePool`], [`Sampling`] and [`MaxPool`].
+//!
+//! Training time is spent in these sparse products, and candle has no sparse tensors, so on the
+//! CPU they are custom ops with hand-written rayon kernels ([`Backend::Kernel`]; ChebConv is one
+//! fused op). Every layer also has a path built only from candle ops ([`Backend::Fallback`]) that
+//! runs on any device; the kernel path switches to it by itself off the CPU, so a CUDA build only
+//! needs this crate's `cuda` feature. Bad arguments are [`ConvError`]s.
+//!
+//! Speed notes: use mimalloc as the global allocator (every op allocates ~50 MB tensors), and
+//! number the template's vertices with [`locality_order`] once, before building the hierarchy,
+//! if its order has little locality (see `docs/benchmarks.md`). Large intermediates are
+//! recycled between calls ([`release_scratch`] frees them).
+//!
+//! ```
+//! use candle_core::{DType, Device, Tensor};
+//! use candle_nn::{VarBuilder, VarMap};
+//! use mesh_hierarchy::{LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian};
+//! use spectral_conv::{ChebConfig, ChebConv, SparseOp};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! // A square of two triangles; L̃ = 2L/λmax − I with λmax = 2, as the authors.
+//! let faces = [[0u32, 1, 2], [0, 2, 3]];
+//! let l = rescaled_laplacian(&normalized_laplacian(&adjacency(4, &faces)), LambdaMax::Two);
+//! let device = Device::Cpu;
+//! let laplacian = SparseOp::new(&l, &device)?;
+//! let vars = VarMap::new();
+//! let vb = VarBuilder::from_varmap(&vars, DType::F32, &device);
+//! let conv = ChebConv::new(laplacian, ChebConfig::new(9, 9), vb.pp("conv1"))?; // K = 3
+//! let x = Tensor::randn(0f32, 1.0, (2, 4, 9), &device)?; // [B, V, C]
+//! let y = conv.forward(&x)?;
+//! assert_eq!(y.dims(), &[2, 4, 9]);
+//! let grads = y.sqr()?.sum_all()?.backward()?; // gradients reach the weights
+//! assert!(grads.get(conv.weight()).is_some());
+//! # Ok(()) }
+//! ```
+
+mod cheb;
+mod cheb_kernel;
+mod cheb_op;
+mod error;
+mod kernel;
+mod order;
+mod pool;
+mod scratch;
+mod spatial;
+mod spmm;
+#[cfg(test)]
+mod test_util;
+mod transpose;
+
+pub use cheb::{ChebConfig, ChebConv};
+pub use error::{ConvError, Result};
+pub use mesh_hierarchy::CsrMatrix;
+pub use order::{inverse_order, locality_order, permute_symmetric};
+pub use pool::{DePool, MaxPool, MeanPool, Sampling};
+pub use scratch::release_scratch;
+pub use spatial::{SpatialConfig, SpatialConv, neighbour_mean_matrix};
+pub use spmm::{Backend, SparseOp};
