@@ -10,6 +10,8 @@ pub enum CliError {
     Features(#[from] deform_features::FeatureError),
     #[error(transparent)]
     Simplify(#[from] qem_simplify::SimplifyError),
+    #[error(transparent)]
+    Vae(#[from] meshvae::VaeError),
     /// A bad combination of arguments that clap cannot catch.
     #[error("{argument}: {message}")]
     Argument {

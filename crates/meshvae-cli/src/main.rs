@@ -11,6 +11,7 @@ mod info;
 mod pack;
 mod simplify;
 mod synth;
+mod train;
 
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -39,6 +40,12 @@ enum Command {
     Roundtrip(features::RoundtripArgs),
     /// Simplify a mesh (or a set's template) by quadric edge collapse with the edge-length term.
     Simplify(simplify::SimplifyArgs),
+    /// Train a mesh VAE on a set; writes a model folder (resumable with --resume).
+    Train(Box<train::TrainArgs>),
+    /// Reconstruction errors of a trained model on its test and training meshes.
+    Eval(train::EvalArgs),
+    /// Write a trained model's reconstructions of the test meshes (or all) as OBJ files.
+    Reconstruct(train::ReconstructArgs),
 }
 
 fn main() -> ExitCode {
@@ -50,6 +57,9 @@ fn main() -> ExitCode {
         Command::Features(args) => features::run_features(args),
         Command::Roundtrip(args) => features::run_roundtrip(args),
         Command::Simplify(args) => simplify::run(args),
+        Command::Train(args) => train::run_train(args),
+        Command::Eval(args) => train::run_eval(args),
+        Command::Reconstruct(args) => train::run_reconstruct(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

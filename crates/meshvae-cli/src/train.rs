@@ -1,0 +1,326 @@
+//! `meshvae train`, `meshvae eval`, `meshvae reconstruct`.
+
+use crate::{CliError, print_warnings};
+use candle_core::Device;
+use deform_features::FeatureOptions;
+use mesh_hierarchy::{DepoolMode, HierarchyConfig};
+use mesh_io::{MeshSet, TriMesh};
+use meshvae::{
+    ConvKind, ModelConfig, ModelFolder, PoolKind, Split, Structure, TrainConfig, TrainOptions,
+    TrainRequest, TrainedModel,
+};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct TrainArgs {
+    /// The mesh set: a folder of meshes, a multi-frame .glb, or a .mvset cache.
+    set: PathBuf,
+    /// The model folder to write (refused if it holds another model, unless --force/--resume).
+    #[arg(long)]
+    out: PathBuf,
+    /// Total epochs [default: 300]. With --resume, may be raised to train further.
+    #[arg(long)]
+    epochs: Option<usize>,
+    /// Seeds the split, the initial weights, the shuffles and the sampling [default: 1].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Layers: C = convolution, P = pooling [default: CCPC].
+    #[arg(long)]
+    structure: Option<Structure>,
+    /// Convolution: spectral (Chebyshev) or spatial [default: spectral].
+    #[arg(long)]
+    conv: Option<ConvKind>,
+    /// Pooling: mean (ours: modified QEM), max, qem (classical QEM), sampling (CoMA), none
+    /// [default: mean].
+    #[arg(long)]
+    pool: Option<PoolKind>,
+    /// Meshes per step [default: 50].
+    #[arg(long)]
+    batch: Option<usize>,
+    /// Adam learning rate [default: 0.001].
+    #[arg(long)]
+    lr: Option<f64>,
+    /// Chebyshev order K [default: 3].
+    #[arg(long)]
+    k: Option<usize>,
+    /// Latent size [default: 128].
+    #[arg(long)]
+    latent: Option<usize>,
+    /// Channels of every hidden convolution [default: 9].
+    #[arg(long)]
+    channels: Option<usize>,
+    /// Loss weights rec,kl,l2 [default: 40,3,1 as the authors' code].
+    #[arg(long, value_parser = parse_weights)]
+    loss_weights: Option<[f64; 3]>,
+    /// A file of training mesh names (one per line); with --test-list instead of a random split.
+    #[arg(long, requires = "test_list")]
+    train_list: Option<PathBuf>,
+    /// A file of test mesh names (one per line).
+    #[arg(long, requires = "train_list")]
+    test_list: Option<PathBuf>,
+    /// De-pooling: copy (each fine vertex gets its coarse value) or transpose (the authors':
+    /// divided by the cluster size) [default: copy].
+    #[arg(long)]
+    depool: Option<DepoolMode>,
+    /// Features without the integrability correction (smoother, inexact round trip).
+    #[arg(long)]
+    plain_features: bool,
+    /// Continue the model in --out from its last checkpoint.
+    #[arg(long, conflicts_with = "force")]
+    resume: bool,
+    /// Replace a model already in --out.
+    #[arg(long)]
+    force: bool,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn parse_weights(s: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|e| format!("`{p}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    <[f64; 3]>::try_from(parts).map_err(|_| "expected three numbers rec,kl,l2".to_string())
+}
+
+fn load(path: &Path) -> Result<MeshSet, CliError> {
+    let loaded = mesh_io::load_set(path)?;
+    print_warnings(&loaded.warnings);
+    Ok(loaded.value)
+}
+
+fn read_list(path: &Path) -> Result<Vec<String>, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CliError::Output {
+        path: path.into(),
+        message: e.to_string(),
+    })?;
+    Ok(text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(String::from)
+        .collect())
+}
+
+pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
+    let set = load(&args.set)?;
+    let folder = ModelFolder::new(&args.out);
+    // Resuming: every setting not given again comes from the model's own config.
+    let stored = if args.resume {
+        Some(folder.read_spec()?)
+    } else {
+        None
+    };
+    let base_model = stored.as_ref().map(|s| s.model.clone()).unwrap_or_default();
+    let base_train = stored
+        .as_ref()
+        .map(|s| s.train.clone())
+        .unwrap_or(TrainConfig {
+            epochs: 300,
+            ..TrainConfig::default()
+        });
+    let base_hierarchy = stored.as_ref().map(|s| s.hierarchy).unwrap_or_default();
+    let features = stored
+        .as_ref()
+        .map(|s| s.features)
+        .unwrap_or(FeatureOptions {
+            integrable: !args.plain_features,
+            ..FeatureOptions::default()
+        });
+
+    let model = ModelConfig {
+        structure: args
+            .structure
+            .clone()
+            .unwrap_or(base_model.structure.clone()),
+        conv: args.conv.unwrap_or(base_model.conv),
+        pool: args.pool.unwrap_or(base_model.pool),
+        k: args.k.unwrap_or(base_model.k),
+        latent: args.latent.unwrap_or(base_model.latent),
+        channels: args.channels.unwrap_or(base_model.channels),
+        ..base_model
+    };
+    let mut train = base_train.clone();
+    train.epochs = args.epochs.unwrap_or(base_train.epochs);
+    train.seed = args.seed.unwrap_or(base_train.seed);
+    train.batch = args.batch.unwrap_or(base_train.batch);
+    train.lr = args.lr.unwrap_or(base_train.lr);
+    if let Some([rec, kl, l2]) = args.loss_weights {
+        train.loss.rec = rec;
+        train.loss.kl = kl;
+        train.loss.l2 = l2;
+    }
+    let hierarchy = HierarchyConfig {
+        depool: args.depool.unwrap_or(base_hierarchy.depool),
+        ..base_hierarchy
+    };
+    let split = match (&args.train_list, &args.test_list) {
+        (Some(a), Some(b)) => Some(Split::from_names(
+            set.names(),
+            &read_list(a)?,
+            &read_list(b)?,
+        )?),
+        _ => None,
+    };
+    let source = std::fs::canonicalize(&args.set).ok();
+    let request = TrainRequest {
+        set: &set,
+        source,
+        out: args.out.clone(),
+        model,
+        train,
+        features,
+        hierarchy,
+        split,
+    };
+    let options = TrainOptions {
+        resume: args.resume,
+        force: args.force,
+        progress: !args.quiet,
+        device: Device::Cpu,
+    };
+    let summary = meshvae::train(&request, &options, |_| {})?;
+    println!(
+        "trained {} epoch(s) in {:.1} s ({} of {} done); best epoch {} (test loss {:.4})",
+        summary.epochs_run,
+        summary.seconds,
+        summary
+            .last
+            .as_ref()
+            .map_or(0, |r| r.epoch)
+            .max(summary.best_epoch),
+        summary.epochs_total,
+        summary.best_epoch,
+        summary.best_loss
+    );
+    println!("model: {}", args.out.display());
+    Ok(())
+}
+
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    /// A model folder written by `meshvae train`.
+    model: PathBuf,
+    /// The mesh set (default: the one the model was trained on, as recorded in its config).
+    #[arg(long)]
+    set: Option<PathBuf>,
+    /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
+    /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance, params,
+    /// params_without_biases, epochs, best_epoch, vertices, test_meshes, train_meshes).
+    #[arg(long)]
+    json: bool,
+}
+
+fn model_and_set(model: &Path, set: Option<&PathBuf>) -> Result<(TrainedModel, MeshSet), CliError> {
+    let trained = TrainedModel::load(model, &Device::Cpu)?;
+    let path = match set {
+        Some(p) => p.clone(),
+        None => trained.spec.source.clone().ok_or_else(|| {
+            CliError::argument(
+                "--set",
+                "the model does not record its mesh set; pass --set",
+            )
+        })?,
+    };
+    let set = load(&path)?;
+    trained.check_set(&set)?;
+    Ok((trained, set))
+}
+
+pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
+    let (trained, set) = model_and_set(&args.model, args.set.as_ref())?;
+    let report = trained.evaluate(&set, &Device::Cpu)?;
+    let epochs = trained.epochs_trained()?;
+    let value = serde_json::json!({
+        "test_rms": report.test.rms,
+        "test_rms_x1000": report.test.rms_x1000,
+        "test_rms_rel": report.test.rms_rel,
+        "test_mean_distance": report.test.mean_distance,
+        "train_rms": report.train.rms,
+        "train_rms_rel": report.train.rms_rel,
+        "mean_shape_rms": report.mean_shape.rms,
+        "mean_shape_rms_rel": report.mean_shape.rms_rel,
+        "params": report.params.with_biases,
+        "params_without_biases": report.params.without_biases,
+        "epochs": epochs.0,
+        "best_epoch": epochs.1,
+        "vertices": report.vertices,
+        "test_meshes": report.test.meshes,
+        "train_meshes": report.train.meshes,
+    });
+    if args.json {
+        let text = serde_json::to_string_pretty(&value)
+            .map_err(|e| CliError::argument("--json", e.to_string()))?;
+        println!("{text}");
+        return Ok(());
+    }
+    println!("{}", args.model.display());
+    println!(
+        "  test RMS     {:.6} ({:.4} ×1000, {:.3e} of the bbox diagonal) over {} meshes",
+        report.test.rms, report.test.rms_x1000, report.test.rms_rel, report.test.meshes
+    );
+    println!(
+        "  train RMS    {:.6} ({:.3e} of the diagonal) over {} meshes",
+        report.train.rms, report.train.rms_rel, report.train.meshes
+    );
+    println!(
+        "  mean shape   {:.6} ({:.3e}): the trivial predictor, on the test meshes",
+        report.mean_shape.rms, report.mean_shape.rms_rel
+    );
+    println!(
+        "  parameters   {} ({} without biases)",
+        report.params.with_biases, report.params.without_biases
+    );
+    println!(
+        "  epochs       {} (weights of epoch {})",
+        epochs.0, epochs.1
+    );
+    Ok(())
+}
+
+#[derive(clap::Args)]
+pub struct ReconstructArgs {
+    /// A model folder written by `meshvae train`.
+    model: PathBuf,
+    /// Folder for the reconstructed meshes (OBJ, named after the originals).
+    #[arg(long)]
+    out: PathBuf,
+    /// The mesh set (default: the one recorded in the model's config).
+    #[arg(long)]
+    set: Option<PathBuf>,
+    /// Reconstruct every mesh of the set, not only the test meshes.
+    #[arg(long)]
+    all: bool,
+}
+
+pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
+    let (trained, set) = model_and_set(&args.model, args.set.as_ref())?;
+    let ids: Vec<usize> = if args.all {
+        (0..set.len()).collect()
+    } else {
+        trained.split.test.clone()
+    };
+    std::fs::create_dir_all(&args.out).map_err(|e| CliError::Output {
+        path: args.out.clone(),
+        message: e.to_string(),
+    })?;
+    let meshes = trained.reconstruct(&set, &ids, &Device::Cpu)?;
+    for (&i, positions) in ids.iter().zip(&meshes) {
+        let mesh = TriMesh::new(
+            positions.iter().map(|p| p.map(|x| x as f32)).collect(),
+            set.faces().to_vec(),
+        )?;
+        let stem = Path::new(&set.names()[i])
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| format!("{i}"));
+        mesh_io::write_mesh(&args.out.join(format!("{stem}.obj")), &mesh)?;
+    }
+    println!(
+        "wrote {} reconstructed meshes to {}",
+        meshes.len(),
+        args.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,132 @@
+//! `meshvae train`, `eval`, `reconstruct` end to end on a small synthetic set.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn meshvae(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_meshvae"))
+        .args(args)
+        .output()
+        .expect("the meshvae binary runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("meshvae-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn ok(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "failed: {err}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fails_with(out: &Output, code: i32, part: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.contains(part), "stderr lacks {part:?}: {err}");
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn train_eval_reconstruct_on_a_synthetic_set() {
+    let dir = scratch("train");
+    let set = dir.join("set");
+    let model = dir.join("model");
+    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "4"]));
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            s(&set),
+            "--out",
+            s(&model),
+            "--epochs",
+            "2",
+            "--batch",
+            "4",
+            "--latent",
+            "16",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        meshvae(&args)
+    };
+    let out = ok(&train(&[]));
+    assert!(out.contains("trained 2 epoch(s)"), "{out}");
+
+    // Another run into the same folder is refused; --resume continues, --force replaces.
+    fails_with(&train(&[]), 1, "already holds a model");
+    let out = ok(&meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&model),
+        "--epochs",
+        "3",
+        "--resume",
+        "--quiet",
+    ]));
+    assert!(out.contains("trained 1 epoch(s)"), "{out}");
+    fails_with(
+        &meshvae(&[
+            "train",
+            s(&set),
+            "--out",
+            s(&model),
+            "--resume",
+            "--lr",
+            "0.5",
+            "--quiet",
+        ]),
+        1,
+        "cannot resume",
+    );
+
+    let json = ok(&meshvae(&["eval", s(&model), "--json"]));
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    for key in [
+        "test_rms",
+        "test_rms_x1000",
+        "test_rms_rel",
+        "train_rms",
+        "params",
+        "epochs",
+        "vertices",
+    ] {
+        assert!(v.get(key).is_some(), "eval --json lacks {key}: {json}");
+    }
+    assert_eq!(v["epochs"], 3);
+    assert_eq!(v["vertices"], 2498);
+    assert!(v["test_rms"].as_f64().unwrap() > 0.0);
+
+    let rec = dir.join("rec");
+    let out = ok(&meshvae(&["reconstruct", s(&model), "--out", s(&rec)]));
+    assert!(out.contains("wrote 4 reconstructed meshes"), "{out}");
+    let objs = std::fs::read_dir(&rec).unwrap().count();
+    assert_eq!(objs, 4);
+
+    // Bad arguments and a foreign set.
+    fails_with(&train(&["--structure", "CXC"]), 2, "--structure");
+    let other = dir.join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    for name in ["a.obj", "b.obj"] {
+        std::fs::write(
+            other.join(name),
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n",
+        )
+        .unwrap();
+    }
+    fails_with(
+        &meshvae(&["eval", s(&model), "--set", s(&other)]),
+        1,
+        "vertices",
+    );
+    fails_with(&meshvae(&["eval", s(&dir)]), 1, "not a model folder");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,457 @@
+//! [`Adam`]: bias-corrected Adam without weight decay (Kingma & Ba; TF's defaults, as the
+//! authors). candle-nn's `AdamW` with weight decay 0 computes the same update, but its moments
+//! are private, so a checkpoint could not restore it; this one exports its whole state
+//! ([`Adam::state_tensors`], [`Adam::load_state`]) so that a resumed run continues bit-exactly.
+//!
+//! Update, per variable θ with gradient g at step t:
+//! m ← β₁m + (1−β₁)g, v ← β₂v + (1−β₂)g², θ ← θ − lr · (m/(1−β₁ᵗ)) / (√(v/(1−β₂ᵗ)) + ε).
+
+use crate::error::{Result, VaeError};
+use crate::ops::{CHUNK, Real, span, span_mut};
+use candle_core::backprop::GradStore;
+use candle_core::{CpuStorage, InplaceOp2, InplaceOp3, Layout, bail};
+use candle_core::{DType, Tensor, Var};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+
+/// Adam's hyper-parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AdamConfig {
+    pub lr: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    pub eps: f64,
+}
+
+impl Default for AdamConfig {
+    /// lr 1e-3, β₁ 0.9, β₂ 0.999, ε 1e-8.
+    fn default() -> Self {
+        Self {
+            lr: 1e-3,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        }
+    }
+}
+
+/// One optimised variable and its moments.
+#[derive(Debug)]
+struct Slot {
+    name: String,
+    var: Var,
+    m: Var,
+    v: Var,
+}
+
+/// The optimiser over a model's named variables.
+#[derive(Debug)]
+pub struct Adam {
+    config: AdamConfig,
+    slots: Vec<Slot>,
+    step: u64,
+}
+
+/// Name of the step counter in [`Adam::state_tensors`].
+const STEP: &str = "adam.step";
+
+impl Adam {
+    /// An optimiser at step 0 over `vars` (e.g. `MeshVae::trainable_vars()`) with learning rate
+    /// `lr` and the other settings of [`AdamConfig::default`].
+    pub fn new(vars: Vec<(String, Var)>, lr: f64) -> Result<Self> {
+        Self::with_config(
+            vars,
+            AdamConfig {
+                lr,
+                ..AdamConfig::default()
+            },
+        )
+    }
+
+    /// An optimiser at step 0 (zero moments) over `vars` with any settings.
+    pub fn with_config(vars: Vec<(String, Var)>, config: AdamConfig) -> Result<Self> {
+        let ok = config.lr.is_finite()
+            && config.lr > 0.0
+            && (0.0..1.0).contains(&config.beta1)
+            && (0.0..1.0).contains(&config.beta2)
+            && config.eps.is_finite()
+            && config.eps > 0.0;
+        if !ok {
+            return Err(VaeError::argument(
+                "adam",
+                format!("{config:?}: needs lr > 0, β₁ and β₂ in [0, 1), ε > 0"),
+            ));
+        }
+        let slots = vars
+            .into_iter()
+            .map(|(name, var)| {
+                let zeros = || Var::zeros(var.shape(), var.dtype(), var.device());
+                Ok(Slot {
+                    m: zeros()?,
+                    v: zeros()?,
+                    name,
+                    var,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            config,
+            slots,
+            step: 0,
+        })
+    }
+
+    pub fn config(&self) -> &AdamConfig {
+        &self.config
+    }
+
+    /// Steps taken so far.
+    pub fn step_count(&self) -> u64 {
+        self.step
+    }
+
+    /// One update from `grads`; variables without a gradient are left alone (moments too).
+    pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.step += 1;
+        let AdamConfig {
+            lr,
+            beta1,
+            beta2,
+            eps,
+        } = self.config;
+        let t = i32::try_from(self.step).unwrap_or(i32::MAX);
+        let scale_m = 1.0 / (1.0 - beta1.powi(t));
+        let scale_v = 1.0 / (1.0 - beta2.powi(t));
+        for slot in &self.slots {
+            let Some(g) = grads.get(&slot.var) else {
+                continue;
+            };
+            if crate::ops::fusable(g) && g.dtype() == slot.var.dtype() {
+                // In place, three passes, no allocation (the same arithmetic as below).
+                let g = g.contiguous()?;
+                slot.m.inplace_op2(
+                    &g,
+                    &Moment {
+                        beta: beta1,
+                        square: false,
+                    },
+                )?;
+                slot.v.inplace_op2(
+                    &g,
+                    &Moment {
+                        beta: beta2,
+                        square: true,
+                    },
+                )?;
+                let apply = AdamApply {
+                    scale_m,
+                    scale_v,
+                    lr,
+                    eps,
+                };
+                slot.var
+                    .inplace_op3(slot.m.as_tensor(), slot.v.as_tensor(), &apply)?;
+                continue;
+            }
+            let m = ((slot.m.as_tensor() * beta1)? + (g * (1.0 - beta1))?)?;
+            let v = ((slot.v.as_tensor() * beta2)? + (g.sqr()? * (1.0 - beta2))?)?;
+            let m_hat = (&m * scale_m)?;
+            let v_hat = (&v * scale_v)?;
+            let update = ((m_hat / (v_hat.sqrt()? + eps)?)? * lr)?;
+            let theta = (slot.var.as_tensor() - update)?;
+            slot.m.set(&m)?;
+            slot.v.set(&v)?;
+            slot.var.set(&theta)?;
+        }
+        Ok(())
+    }
+
+    /// Copies of the whole state: `adam.m.<var>`, `adam.v.<var>` and `adam.step` (i64 `[1]`).
+    pub fn state_tensors(&self) -> Result<Vec<(String, Tensor)>> {
+        let device = self
+            .slots
+            .first()
+            .map(|s| s.var.device().clone())
+            .unwrap_or(candle_core::Device::Cpu);
+        let mut out = vec![(STEP.to_owned(), Tensor::new(&[self.step as i64], &device)?)];
+        for s in &self.slots {
+            out.push((format!("adam.m.{}", s.name), s.m.as_tensor().copy()?));
+            out.push((format!("adam.v.{}", s.name), s.v.as_tensor().copy()?));
+        }
+        Ok(out)
+    }
+
+    /// Restores a state from [`Self::state_tensors`]. Every name and shape is checked before
+    /// anything changes; extra tensors not named `adam.*` are ignored (so a checkpoint can hold
+    /// the model's tensors too).
+    pub fn load_state(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        let step = tensors
+            .get(STEP)
+            .ok_or_else(|| VaeError::argument("adam state", format!("no {STEP}")))?;
+        let step = step
+            .flatten_all()?
+            .to_dtype(DType::I64)?
+            .to_vec1::<i64>()?
+            .first()
+            .copied()
+            .filter(|&s| s >= 0)
+            .ok_or_else(|| VaeError::argument("adam state", format!("{STEP} is not a count")))?;
+        let mut moments = Vec::with_capacity(self.slots.len());
+        for s in &self.slots {
+            let get = |kind: &str| -> Result<&Tensor> {
+                let name = format!("adam.{kind}.{}", s.name);
+                match tensors.get(&name) {
+                    Some(t) if t.dims() == s.var.dims() => Ok(t),
+                    Some(t) => Err(VaeError::argument(
+                        "adam state",
+                        format!(
+                            "{name} has shape {:?}, the variable {:?}",
+                            t.dims(),
+                            s.var.dims()
+                        ),
+                    )),
+                    None => Err(VaeError::argument("adam state", format!("no {name}"))),
+                }
+            };
+            moments.push((get("m")?, get("v")?));
+        }
+        let known = 1 + 2 * self.slots.len();
+        let ours = tensors.keys().filter(|k| k.starts_with("adam.")).count();
+        if ours != known {
+            return Err(VaeError::argument(
+                "adam state",
+                format!("{ours} adam.* tensors for {known} expected (another model's state?)"),
+            ));
+        }
+        for (s, (m, v)) in self.slots.iter().zip(moments) {
+            s.m.set(&m.to_dtype(s.var.dtype())?)?;
+            s.v.set(&v.to_dtype(s.var.dtype())?)?;
+        }
+        self.step = step as u64;
+        Ok(())
+    }
+}
+
+// The fused in-place update (CPU, f32/f64).
+
+/// In place: m ← β·m + (1−β)·g (`square`: g² instead of g), the arithmetic of candle's AdamW.
+struct Moment {
+    beta: f64,
+    square: bool,
+}
+
+impl InplaceOp2 for Moment {
+    fn name(&self) -> &'static str {
+        "adam-moment"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &mut CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<()> {
+        fn run<T: Real>(m: &mut [T], g: &[T], beta: f64, square: bool) {
+            let (b, c) = (T::of(beta), T::of(1.0 - beta));
+            m.par_chunks_mut(CHUNK)
+                .zip(g.par_chunks(CHUNK))
+                .for_each(|(m, g)| {
+                    for (m, &g) in m.iter_mut().zip(g) {
+                        let g = if square { g * g } else { g };
+                        *m = *m * b + g * c;
+                    }
+                });
+        }
+        if l1.shape() != l2.shape() {
+            bail!("adam-moment: shapes {:?} and {:?}", l1.shape(), l2.shape());
+        }
+        match (s1, s2) {
+            (CpuStorage::F32(m), CpuStorage::F32(g)) => run(
+                span_mut("adam", m, l1)?,
+                span("adam", g, l2)?,
+                self.beta,
+                self.square,
+            ),
+            (CpuStorage::F64(m), CpuStorage::F64(g)) => run(
+                span_mut("adam", m, l1)?,
+                span("adam", g, l2)?,
+                self.beta,
+                self.square,
+            ),
+            _ => bail!("adam-moment: f32 or f64 of one dtype only"),
+        }
+        Ok(())
+    }
+}
+
+/// In place: θ ← θ − lr · (m·scale_m) / (√(v·scale_v) + ε).
+struct AdamApply {
+    scale_m: f64,
+    scale_v: f64,
+    lr: f64,
+    eps: f64,
+}
+
+impl InplaceOp3 for AdamApply {
+    fn name(&self) -> &'static str {
+        "adam-apply"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &mut CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> candle_core::Result<()> {
+        fn run<T: Real>(theta: &mut [T], m: &[T], v: &[T], a: &AdamApply) {
+            let (sm, sv, lr, eps) = (
+                T::of(a.scale_m),
+                T::of(a.scale_v),
+                T::of(a.lr),
+                T::of(a.eps),
+            );
+            theta
+                .par_chunks_mut(CHUNK)
+                .zip(m.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
+                .for_each(|(t, (m, v))| {
+                    for ((t, &m), &v) in t.iter_mut().zip(m).zip(v) {
+                        *t = *t - (m * sm) / ((v * sv).sqrt() + eps) * lr;
+                    }
+                });
+        }
+        if l1.shape() != l2.shape() || l1.shape() != l3.shape() {
+            bail!("adam-apply: shapes differ");
+        }
+        match (s1, s2, s3) {
+            (CpuStorage::F32(t), CpuStorage::F32(m), CpuStorage::F32(v)) => run(
+                span_mut("adam", t, l1)?,
+                span("adam", m, l2)?,
+                span("adam", v, l3)?,
+                self,
+            ),
+            (CpuStorage::F64(t), CpuStorage::F64(m), CpuStorage::F64(v)) => run(
+                span_mut("adam", t, l1)?,
+                span("adam", m, l2)?,
+                span("adam", v, l3)?,
+                self,
+            ),
+            _ => bail!("adam-apply: f32 or f64 of one dtype only"),
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+    use candle_core::Device;
+    use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+
+    /// A small non-quadratic loss of two variables, so the moments differ per element.
+    fn loss(a: &Var, b: &Var, target: &Tensor) -> Tensor {
+        let y = a.as_tensor().matmul(b.as_tensor()).unwrap().tanh().unwrap();
+        (y - target).unwrap().sqr().unwrap().sum_all().unwrap()
+    }
+
+    fn setup(seed: u64) -> (Var, Var, Tensor) {
+        let mut rng = Rng::new(seed);
+        let dev = Device::Cpu;
+        let a = Var::from_tensor(&rng.normal_tensor((4, 3), &dev).unwrap()).unwrap();
+        let b = Var::from_tensor(&rng.normal_tensor((3, 5), &dev).unwrap()).unwrap();
+        let t = rng.normal_tensor((4, 5), &dev).unwrap();
+        (a, b, t)
+    }
+
+    fn max_diff(x: &Tensor, y: &Tensor) -> f32 {
+        (x - y)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar()
+            .unwrap()
+    }
+
+    #[test]
+    fn fifty_steps_match_candle_adamw_without_decay() {
+        let (a1, b1, t) = setup(1);
+        let (a2, b2, _) = setup(1);
+        let mut ours = Adam::new(
+            vec![("a".into(), a1.clone()), ("b".into(), b1.clone())],
+            1e-3,
+        )
+        .unwrap();
+        let params = ParamsAdamW {
+            weight_decay: 0.0,
+            ..Default::default()
+        };
+        let mut theirs = AdamW::new(vec![a2.clone(), b2.clone()], params).unwrap();
+        let start = a1.as_tensor().copy().unwrap();
+        for _ in 0..50 {
+            ours.step(&loss(&a1, &b1, &t).backward().unwrap()).unwrap();
+            theirs
+                .step(&loss(&a2, &b2, &t).backward().unwrap())
+                .unwrap();
+        }
+        assert!(max_diff(a1.as_tensor(), a2.as_tensor()) < 1e-6);
+        assert!(max_diff(b1.as_tensor(), b2.as_tensor()) < 1e-6);
+        // It moved: 50 steps of lr 1e-3 change the weights by up to ~0.05.
+        assert!(max_diff(a1.as_tensor(), &start) > 1e-2);
+        assert_eq!(ours.step_count(), 50);
+    }
+
+    #[test]
+    fn state_round_trip_resumes_exactly() {
+        let (a, b, t) = setup(2);
+        let vars = || vec![("a".to_owned(), a.clone()), ("b".to_owned(), b.clone())];
+        let mut opt = Adam::new(vars(), 1e-3).unwrap();
+        for _ in 0..5 {
+            opt.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+        }
+        let state: HashMap<String, Tensor> = opt.state_tensors().unwrap().into_iter().collect();
+        let (wa, wb) = (a.as_tensor().copy().unwrap(), b.as_tensor().copy().unwrap());
+        for _ in 0..5 {
+            opt.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+        }
+        let (ua, ub) = (a.as_tensor().copy().unwrap(), b.as_tensor().copy().unwrap());
+        // Rewind the weights and restore the optimiser into a fresh one.
+        a.set(&wa).unwrap();
+        b.set(&wb).unwrap();
+        let mut resumed = Adam::new(vars(), 1e-3).unwrap();
+        resumed.load_state(&state).unwrap();
+        assert_eq!(resumed.step_count(), 5);
+        for _ in 0..5 {
+            resumed.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+        }
+        assert_eq!(max_diff(a.as_tensor(), &ua), 0.0);
+        assert_eq!(max_diff(b.as_tensor(), &ub), 0.0);
+    }
+
+    #[test]
+    fn bad_state_and_config_are_typed_errors() {
+        let (a, _, _) = setup(3);
+        assert!(Adam::new(vec![], 0.0).is_err());
+        let mut opt = Adam::new(vec![("a".into(), a.clone())], 1e-3).unwrap();
+        let mut state: HashMap<String, Tensor> = opt.state_tensors().unwrap().into_iter().collect();
+        state.insert(
+            "adam.m.a".into(),
+            Tensor::zeros((2, 2), DType::F32, &Device::Cpu).unwrap(),
+        );
+        let err = opt.load_state(&state).unwrap_err().to_string();
+        assert!(err.contains("adam.m.a") && err.contains("shape"), "{err}");
+        state.remove("adam.m.a");
+        assert!(
+            opt.load_state(&state)
+                .unwrap_err()
+                .to_string()
+                .contains("no adam.m.a")
+        );
+    }
+}

@@ -1,0 +1,336 @@
+//! [`ModelConfig`]: every choice that shapes the network (saved as JSON with a model), and the
+//! layer plan ([`ConvSpec`]) that both the model and the parameter count are built from.
+
+use crate::error::{Result, VaeError};
+use crate::structure::{Layer, Structure};
+use mesh_hierarchy::{HierarchyConfig, Pooler};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Channels of the per-vertex ACAP feature (log-rotation 3 + stretch 6): the network's input and
+/// output width.
+pub const FEATURE_CHANNELS: usize = 9;
+
+/// The graph convolution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ConvKind {
+    /// Chebyshev spectral convolution of order K (the paper).
+    #[default]
+    Spectral,
+    /// Self plus neighbour-mean convolution (the paper's "Only Spatial Conv." ablation).
+    Spatial,
+}
+
+/// The pooling between levels (the paper's ablation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PoolKind {
+    /// The paper's: edge contraction with the edge-length term, mean pooling.
+    #[default]
+    Mean,
+    /// The same simplification, signed max-magnitude pooling.
+    Max,
+    /// Classical QEM simplification, mean pooling.
+    Qem,
+    /// CoMA sampling: keep the survivors, barycentric up-sampling.
+    Sampling,
+    /// No pooling: every level is the template (the authors' no-pooling ablation).
+    None,
+}
+
+impl PoolKind {
+    pub const ALL: [PoolKind; 5] = [Self::Mean, Self::Max, Self::Qem, Self::Sampling, Self::None];
+}
+
+macro_rules! names {
+    ($ty:ty, $what:literal, $($variant:ident => $name:literal),+) => {
+        impl fmt::Display for $ty {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(match self { $(Self::$variant => $name),+ })
+            }
+        }
+
+        impl FromStr for $ty {
+            type Err = VaeError;
+
+            fn from_str(s: &str) -> Result<Self> {
+                match s.to_ascii_lowercase().as_str() {
+                    $($name => Ok(Self::$variant),)+
+                    _ => Err(VaeError::argument(
+                        $what,
+                        format!("{s:?} is not one of {}", [$($name),+].join(", ")),
+                    )),
+                }
+            }
+        }
+    };
+}
+
+names!(ConvKind, "conv", Spectral => "spectral", Spatial => "spatial");
+names!(PoolKind, "pool", Mean => "mean", Max => "max", Qem => "qem", Sampling => "sampling",
+    None => "none");
+
+/// The network's configuration. `Default` is the paper's network as the authors' code runs it
+/// (see /work/shared/notes/authors-code.md §4), except `last_encoder_linear`, which follows the
+/// paper's text.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelConfig {
+    /// Encoder layers, e.g. `CCPC`; the decoder mirrors them.
+    pub structure: Structure,
+    pub conv: ConvKind,
+    pub pool: PoolKind,
+    /// Chebyshev terms (orders 0 … K−1) of a spectral convolution; unused by spatial ones.
+    pub k: usize,
+    /// Size of the latent vector z.
+    pub latent: usize,
+    /// Width of every hidden convolution (the authors: 9, as the input).
+    pub channels: usize,
+    /// Batch norm after every convolution except the last encoder one and the output one.
+    pub batch_norm: bool,
+    /// No activation on the last encoder convolution (the paper's text); `false` = tanh (the
+    /// authors' code).
+    pub last_encoder_linear: bool,
+    /// Each decoder convolution is the adjoint of its mirror encoder convolution (the paper's
+    /// text) instead of having its own weights (the authors' code).
+    pub tie_decoder_convs: bool,
+    /// Standard deviation of the normal initialisation of every weight matrix.
+    pub init_std: f64,
+}
+
+impl Default for ModelConfig {
+    fn default() -> Self {
+        Self {
+            structure: Structure::default(),
+            conv: ConvKind::Spectral,
+            pool: PoolKind::Mean,
+            k: 3,
+            latent: 128,
+            channels: FEATURE_CHANNELS,
+            batch_norm: true,
+            last_encoder_linear: true,
+            tie_decoder_convs: false,
+            init_std: 0.02,
+        }
+    }
+}
+
+/// One convolution of the plan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConvSpec {
+    /// Index of the encoder convolution (a decoder convolution carries its mirror's index).
+    pub index: usize,
+    /// Hierarchy level it runs on (0 = template).
+    pub level: usize,
+    pub c_in: usize,
+    pub c_out: usize,
+    /// Followed by batch norm.
+    pub batch_norm: bool,
+    /// Followed by tanh (otherwise linear).
+    pub tanh: bool,
+}
+
+impl ModelConfig {
+    /// The hierarchy's pooler for this pooling kind.
+    pub fn pooler(&self) -> Pooler {
+        match self.pool {
+            PoolKind::Mean => Pooler::Ours,
+            PoolKind::Qem => Pooler::Qem,
+            PoolKind::Max => Pooler::Max,
+            PoolKind::Sampling => Pooler::Sampling,
+            PoolKind::None => Pooler::None,
+        }
+    }
+
+    /// Number of pooling steps = number of P in the structure. With `pool = none` the hierarchy
+    /// still has that many (identity) steps, every level being the template.
+    pub fn pool_levels(&self) -> usize {
+        self.structure.pools()
+    }
+
+    /// `HierarchyConfig::default()` with this configuration's pooler and level count.
+    pub fn hierarchy_config(&self) -> HierarchyConfig {
+        HierarchyConfig {
+            pooler: self.pooler(),
+            levels: self.pool_levels(),
+            ..HierarchyConfig::default()
+        }
+    }
+
+    /// Checks the sizes: K, latent, channels ≥ 1 and a finite, non-negative `init_std`.
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("k", self.k),
+            ("latent", self.latent),
+            ("channels", self.channels),
+        ];
+        for (arg, value) in positive {
+            if value == 0 {
+                return Err(VaeError::argument(arg, "must be at least 1"));
+            }
+        }
+        if !(self.init_std.is_finite() && self.init_std >= 0.0) {
+            return Err(VaeError::argument(
+                "init_std",
+                format!("{} is not a finite non-negative number", self.init_std),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The encoder's convolutions in order: the first maps the 9 feature channels to
+    /// `channels`, every other one keeps `channels`.
+    pub fn encoder_convs(&self) -> Vec<ConvSpec> {
+        let total = self.structure.convs();
+        let mut level = 0;
+        let mut convs = Vec::with_capacity(total);
+        for layer in self.structure.layers() {
+            match layer {
+                Layer::Pool => level += 1,
+                Layer::Conv => {
+                    let index = convs.len();
+                    let last = index + 1 == total;
+                    convs.push(ConvSpec {
+                        index,
+                        level,
+                        c_in: if index == 0 {
+                            FEATURE_CHANNELS
+                        } else {
+                            self.channels
+                        },
+                        c_out: self.channels,
+                        batch_norm: self.batch_norm && !last,
+                        tanh: !(last && self.last_encoder_linear),
+                    });
+                }
+            }
+        }
+        convs
+    }
+
+    /// The decoder's convolutions in the order they run: the mirrors of the encoder's, in
+    /// reverse, with input and output widths swapped (so the last one, the output convolution,
+    /// maps `channels` to 9). All end in tanh; all but the output one have batch norm.
+    pub fn decoder_convs(&self) -> Vec<ConvSpec> {
+        self.encoder_convs()
+            .into_iter()
+            .rev()
+            .map(|e| ConvSpec {
+                index: e.index,
+                level: e.level,
+                c_in: e.c_out,
+                c_out: e.c_in,
+                batch_norm: self.batch_norm && e.index != 0,
+                tanh: true,
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_and_json_round_trip() {
+        let c = ModelConfig::default();
+        assert_eq!((c.k, c.latent, c.channels, c.init_std), (3, 128, 9, 0.02));
+        assert_eq!(c.pooler(), Pooler::Ours);
+        assert_eq!(c.pool_levels(), 1);
+        let json = serde_json::to_string(&c).unwrap();
+        assert!(json.contains("\"structure\":\"CCPC\""), "{json}");
+        assert!(json.contains("\"pool\":\"mean\"") && json.contains("\"conv\":\"spectral\""));
+        assert_eq!(serde_json::from_str::<ModelConfig>(&json).unwrap(), c);
+    }
+
+    #[test]
+    fn names_parse_like_the_cli() {
+        for p in PoolKind::ALL {
+            assert_eq!(p.to_string().parse::<PoolKind>().unwrap(), p);
+        }
+        assert_eq!("QEM".parse::<PoolKind>().unwrap(), PoolKind::Qem);
+        assert_eq!("spatial".parse::<ConvKind>().unwrap(), ConvKind::Spatial);
+        let err = "avg".parse::<PoolKind>().unwrap_err().to_string();
+        assert!(err.contains("pool") && err.contains("\"avg\""), "{err}");
+        let poolers: Vec<Pooler> = PoolKind::ALL
+            .iter()
+            .map(|&pool| {
+                ModelConfig {
+                    pool,
+                    ..Default::default()
+                }
+                .pooler()
+            })
+            .collect();
+        assert_eq!(
+            poolers,
+            [
+                Pooler::Ours,
+                Pooler::Max,
+                Pooler::Qem,
+                Pooler::Sampling,
+                Pooler::None
+            ]
+        );
+    }
+
+    #[test]
+    fn the_plan_mirrors_the_encoder() {
+        let c = ModelConfig {
+            structure: "CPCC".parse().unwrap(),
+            channels: 16,
+            ..Default::default()
+        };
+        let enc = c.encoder_convs();
+        let levels: Vec<_> = enc.iter().map(|s| (s.level, s.c_in, s.c_out)).collect();
+        assert_eq!(levels, [(0, 9, 16), (1, 16, 16), (1, 16, 16)]);
+        assert_eq!(
+            enc.iter().map(|s| s.batch_norm).collect::<Vec<_>>(),
+            [true, true, false]
+        );
+        assert_eq!(
+            enc.iter().map(|s| s.tanh).collect::<Vec<_>>(),
+            [true, true, false]
+        );
+        let dec = c.decoder_convs();
+        let plan: Vec<_> = dec
+            .iter()
+            .map(|s| (s.index, s.level, s.c_in, s.c_out))
+            .collect();
+        assert_eq!(plan, [(2, 1, 16, 16), (1, 1, 16, 16), (0, 0, 16, 9)]);
+        assert_eq!(
+            dec.iter().map(|s| s.batch_norm).collect::<Vec<_>>(),
+            [true, true, false]
+        );
+        assert!(dec.iter().all(|s| s.tanh));
+        let authors = ModelConfig {
+            last_encoder_linear: false,
+            batch_norm: false,
+            ..c
+        };
+        assert!(
+            authors
+                .encoder_convs()
+                .iter()
+                .all(|s| s.tanh && !s.batch_norm)
+        );
+        assert!(
+            ModelConfig {
+                k: 0,
+                ..Default::default()
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(
+            ModelConfig {
+                init_std: f64::NAN,
+                ..Default::default()
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(ModelConfig::default().validate().is_ok());
+    }
+}

@@ -1,0 +1,142 @@
+//! [`MeshData`]: a mesh set turned into what the network eats — ACAP features of every mesh,
+//! normalised into ±0.95 by ranges fitted on the training split only, and batches of them as
+//! `[B, V, 9]` tensors.
+
+use crate::error::{Result, VaeError};
+use crate::split::Split;
+use candle_core::{Device, Tensor};
+use deform_features::{CHANNELS, FeatureExtractor, FeatureOptions, FeatureSet, Normalization};
+use mesh_io::MeshSet;
+
+/// Features of a set, their normalisation, and the split they were fitted on.
+#[derive(Debug, Clone)]
+pub struct MeshData {
+    /// Raw features of every mesh (relative to the set's first mesh, the rest pose).
+    pub raw: FeatureSet,
+    /// The same, normalised with [`Self::normalization`].
+    pub normalized: FeatureSet,
+    /// Fitted on the training meshes only, so the test meshes stay unseen.
+    pub normalization: Normalization,
+    pub split: Split,
+    /// Warnings of the feature extraction (degenerate faces and the like).
+    pub warnings: Vec<String>,
+}
+
+impl MeshData {
+    /// Features of every mesh of `set` with a normalisation fitted on `split.train`.
+    pub fn prepare(set: &MeshSet, split: Split, options: FeatureOptions) -> Result<Self> {
+        let extractor = FeatureExtractor::for_set(set, options)?;
+        let features = extractor.extract(set)?;
+        Self::from_features(features.features, split, features.warnings)
+    }
+
+    /// As [`Self::prepare`] from features already computed.
+    pub fn from_features(raw: FeatureSet, split: Split, warnings: Vec<String>) -> Result<Self> {
+        split.check(raw.frames())?;
+        let normalization = Normalization::fit([&raw.subset(&split.train)?])?;
+        Ok(Self::with_normalization(
+            raw,
+            split,
+            normalization,
+            warnings,
+        ))
+    }
+
+    /// With a given normalisation (a saved model's).
+    pub fn with_normalization(
+        raw: FeatureSet,
+        split: Split,
+        normalization: Normalization,
+        warnings: Vec<String>,
+    ) -> Self {
+        let normalized = normalization.apply(&raw);
+        Self {
+            raw,
+            normalized,
+            normalization,
+            split,
+            warnings,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.raw.frames()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.raw.vertices()
+    }
+
+    /// Normalised features of the meshes `indices` as an f32 tensor `[B, V, 9]`.
+    pub fn batch(&self, indices: &[usize], device: &Device) -> Result<Tensor> {
+        let per_mesh = self.vertex_count() * CHANNELS;
+        let mut data = Vec::with_capacity(indices.len() * per_mesh);
+        for &i in indices {
+            if i >= self.len() {
+                return Err(VaeError::argument(
+                    "mesh index",
+                    format!("{i} is out of range ({} meshes)", self.len()),
+                ));
+            }
+            data.extend_from_slice(self.normalized.frame(i));
+        }
+        Ok(Tensor::from_vec(
+            data,
+            (indices.len(), self.vertex_count(), CHANNELS),
+            device,
+        )?)
+    }
+}
+
+/// Raw (de-normalised) features from a network output `[B, V, 9]` in normalised units.
+pub fn denormalize(normalization: &Normalization, output: &Tensor) -> Result<FeatureSet> {
+    let (b, v, c) = output.dims3()?;
+    if c != CHANNELS {
+        return Err(VaeError::shape(
+            "denormalize",
+            format!("output has {c} channels, expected {CHANNELS}"),
+        ));
+    }
+    let flat: Vec<f32> = output.flatten_all()?.to_vec1()?;
+    Ok(normalization.invert(&FeatureSet::new(b, v, flat)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mesh_io::synth::{SynthConfig, generate};
+
+    #[test]
+    fn normalisation_sees_only_the_training_meshes() {
+        let set = generate(&SynthConfig {
+            meshes_per_label: 4,
+            ..SynthConfig::default()
+        })
+        .unwrap()
+        .set;
+        let split = Split::random(set.len(), 0.5, 3).unwrap();
+        let data = MeshData::prepare(&set, split.clone(), FeatureOptions::default()).unwrap();
+        let train = data.normalized.subset(&split.train).unwrap();
+        let extreme = train.as_slice().iter().fold(0f32, |m, x| m.max(x.abs()));
+        assert!(
+            (extreme - 0.95).abs() < 1e-3,
+            "train range reaches ±0.95: {extreme}"
+        );
+        let on_train = Normalization::fit([&data.raw.subset(&split.train).unwrap()]).unwrap();
+        let on_test = Normalization::fit([&data.raw.subset(&split.test).unwrap()]).unwrap();
+        assert_eq!(data.normalization, on_train);
+        assert_ne!(data.normalization, on_test);
+
+        let x = data.batch(&[1, 0], &Device::Cpu).unwrap();
+        assert_eq!(x.dims(), &[2, set.vertex_count(), CHANNELS]);
+        let back = denormalize(&data.normalization, &x).unwrap();
+        for (a, b) in back.frame(0).iter().zip(data.raw.frame(1)) {
+            assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+        }
+        assert!(data.batch(&[99], &Device::Cpu).is_err());
+    }
+}

@@ -1,0 +1,302 @@
+//! The model folder: everything needed to use a trained model without the training run.
+//!
+//! ```text
+//! MODEL/
+//!   config.json          ModelSpec: model, training and feature settings, set description
+//!   hierarchy.json       mesh levels, Laplacians, pooling operators (mesh-hierarchy's format)
+//!   normalization.json   feature ranges fitted on the training split
+//!   split.json           training and test indices (and names)
+//!   template.obj         the rest mesh features are relative to
+//!   weights.safetensors  the best weights (lowest test loss)
+//!   checkpoint.safetensors  the last epoch: weights, optimiser, random state (for --resume)
+//!   log.jsonl            one line of losses per epoch
+//! ```
+//!
+//! Every file is written atomically (temporary file, then rename).
+
+use crate::config::ModelConfig;
+use crate::error::{Result, VaeError};
+use crate::loss::LossWeights;
+use crate::model::MeshVae;
+use crate::split::Split;
+use candle_core::Device;
+use deform_features::{FeatureOptions, Normalization};
+use mesh_hierarchy::{Hierarchy, HierarchyConfig};
+use mesh_io::{MeshSet, TriMesh};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Tag of `config.json`.
+pub const FORMAT: &str = "meshvae-model";
+/// Version of the folder layout.
+pub const VERSION: u32 = 1;
+
+/// Training settings (saved with the model).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainConfig {
+    /// Total epochs; a resumed run may raise it.
+    pub epochs: usize,
+    /// Meshes per step (the authors: 50); the last batch of an epoch may be smaller.
+    pub batch: usize,
+    /// Adam's learning rate (1e-3).
+    pub lr: f64,
+    /// Seeds the split, the initial weights, the shuffles and the sampling noise.
+    pub seed: u64,
+    pub loss: LossWeights,
+    /// Fraction of the set held out for testing when no lists are given (0.5).
+    pub test_fraction: f64,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            epochs: 100,
+            batch: 50,
+            lr: 1e-3,
+            seed: 1,
+            loss: LossWeights::default(),
+            test_fraction: 0.5,
+        }
+    }
+}
+
+impl TrainConfig {
+    pub fn validate(&self) -> Result<()> {
+        if self.batch == 0 {
+            return Err(VaeError::argument("batch", "must be at least 1"));
+        }
+        if !(self.lr.is_finite() && self.lr > 0.0) {
+            return Err(VaeError::argument(
+                "lr",
+                format!("{} is not positive", self.lr),
+            ));
+        }
+        let w = self.loss;
+        if ![w.rec, w.kl, w.l2]
+            .iter()
+            .all(|x| x.is_finite() && *x >= 0.0)
+        {
+            return Err(VaeError::argument(
+                "loss weights",
+                "must be finite and non-negative",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `config.json`: what the model is and what it was trained on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelSpec {
+    pub format: String,
+    pub version: u32,
+    pub model: ModelConfig,
+    pub train: TrainConfig,
+    pub features: FeatureOptions,
+    pub hierarchy: HierarchyConfig,
+    /// Connectivity of the training set, checked whenever the model meets a mesh set.
+    pub vertices: usize,
+    pub faces: usize,
+    /// The set's mesh names, in order (the split's indices refer to them).
+    pub names: Vec<String>,
+    /// Where the set was loaded from, if from disk (used by `eval` when no set is given).
+    pub source: Option<PathBuf>,
+}
+
+impl ModelSpec {
+    /// Checks that `set` has this model's connectivity.
+    pub fn check_set(&self, set: &MeshSet, template: &TriMesh, dir: &Path) -> Result<()> {
+        if set.vertex_count() != self.vertices || set.faces().len() != self.faces {
+            return Err(VaeError::model(
+                dir,
+                format!(
+                    "the model was trained on meshes of {} vertices and {} faces; this set has {} \
+                     vertices and {} faces",
+                    self.vertices,
+                    self.faces,
+                    set.vertex_count(),
+                    set.faces().len()
+                ),
+            ));
+        }
+        if set.faces() != template.faces.as_slice() {
+            return Err(VaeError::model(
+                dir,
+                "the set's faces differ from the model's template: another connectivity",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Paths of a model folder's files.
+#[derive(Debug, Clone)]
+pub struct ModelFolder {
+    pub dir: PathBuf,
+}
+
+impl ModelFolder {
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self { dir: dir.into() }
+    }
+    pub fn config(&self) -> PathBuf {
+        self.dir.join("config.json")
+    }
+    pub fn hierarchy(&self) -> PathBuf {
+        self.dir.join("hierarchy.json")
+    }
+    pub fn normalization(&self) -> PathBuf {
+        self.dir.join("normalization.json")
+    }
+    pub fn split(&self) -> PathBuf {
+        self.dir.join("split.json")
+    }
+    pub fn template(&self) -> PathBuf {
+        self.dir.join("template.obj")
+    }
+    pub fn weights(&self) -> PathBuf {
+        self.dir.join("weights.safetensors")
+    }
+    pub fn checkpoint(&self) -> PathBuf {
+        self.dir.join("checkpoint.safetensors")
+    }
+    pub fn log(&self) -> PathBuf {
+        self.dir.join("log.jsonl")
+    }
+
+    /// Whether the folder holds a model (its `config.json`).
+    pub fn has_model(&self) -> bool {
+        self.config().is_file()
+    }
+
+    pub fn write_json<T: Serialize>(&self, path: &Path, value: &T) -> Result<()> {
+        mesh_io::atomic::write_atomic(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
+            std::io::Write::write_all(w, b"\n")
+        })?;
+        Ok(())
+    }
+
+    pub fn read_json<T: for<'de> Deserialize<'de>>(&self, path: &Path) -> Result<T> {
+        let bytes = std::fs::read(path).map_err(|e| VaeError::io(path, e))?;
+        serde_json::from_slice(&bytes).map_err(|e| VaeError::model(path, e.to_string()))
+    }
+
+    pub fn read_spec(&self) -> Result<ModelSpec> {
+        let path = self.config();
+        if !path.is_file() {
+            return Err(VaeError::model(
+                &self.dir,
+                "not a model folder (no config.json)",
+            ));
+        }
+        let spec: ModelSpec = self.read_json(&path)?;
+        if spec.format != FORMAT || spec.version != VERSION {
+            return Err(VaeError::model(
+                &path,
+                format!(
+                    "format {} version {}; this meshvae reads {FORMAT} version {VERSION}",
+                    spec.format, spec.version
+                ),
+            ));
+        }
+        Ok(spec)
+    }
+}
+
+/// Split indices with the names they had (a human can read which meshes were held out).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SplitFile {
+    pub train: Vec<usize>,
+    pub test: Vec<usize>,
+    pub train_names: Vec<String>,
+    pub test_names: Vec<String>,
+}
+
+impl SplitFile {
+    pub fn new(split: &Split, names: &[String]) -> Self {
+        let pick = |idx: &[usize]| idx.iter().map(|&i| names[i].clone()).collect();
+        Self {
+            train: split.train.clone(),
+            test: split.test.clone(),
+            train_names: pick(&split.train),
+            test_names: pick(&split.test),
+        }
+    }
+}
+
+/// A model folder loaded for use: the network with its best weights and everything around it.
+#[derive(Debug)]
+pub struct TrainedModel {
+    pub folder: ModelFolder,
+    pub spec: ModelSpec,
+    pub model: MeshVae,
+    pub hierarchy: Hierarchy,
+    pub normalization: Normalization,
+    pub split: Split,
+    pub template: TriMesh,
+}
+
+impl TrainedModel {
+    /// Loads `dir` (the best weights, or the last checkpoint's if no best was saved yet).
+    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        let folder = ModelFolder::new(dir);
+        let spec = folder.read_spec()?;
+        let hierarchy = Hierarchy::load(&folder.hierarchy())?;
+        let normalization: Normalization = folder.read_json(&folder.normalization())?;
+        normalization.validate()?;
+        let split_file: SplitFile = folder.read_json(&folder.split())?;
+        let split = Split {
+            train: split_file.train,
+            test: split_file.test,
+        };
+        split
+            .check(spec.names.len())
+            .map_err(|e| VaeError::model(folder.split(), e.to_string()))?;
+        let template = mesh_io::read_mesh(&folder.template())?.value;
+        if template.vertex_count() != spec.vertices
+            || hierarchy.levels[0].vertex_count != spec.vertices
+        {
+            return Err(VaeError::model(
+                dir,
+                "template, hierarchy and config disagree on the vertex count",
+            ));
+        }
+        let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
+        let weights = folder.weights();
+        if weights.is_file() {
+            model.load(&weights)?;
+        } else {
+            crate::checkpoint::Checkpoint::load_model_only(&folder.checkpoint(), &mut model)?;
+        }
+        Ok(Self {
+            folder,
+            spec,
+            model,
+            hierarchy,
+            normalization,
+            split,
+            template,
+        })
+    }
+}
+
+impl TrainedModel {
+    /// Epochs trained so far and the epoch whose weights are loaded, from `log.jsonl`.
+    pub fn epochs_trained(&self) -> Result<(usize, usize)> {
+        let path = self.folder.log();
+        if !path.is_file() {
+            return Ok((0, 0));
+        }
+        let log = crate::train::read_log(&path)?;
+        let last = log.last().map_or(0, |r| r.epoch);
+        let best = log
+            .iter()
+            .min_by(|a, b| {
+                let score = |r: &crate::train::EpochRecord| r.test_loss.unwrap_or(r.train_loss);
+                score(a).total_cmp(&score(b))
+            })
+            .map_or(0, |r| r.epoch);
+        Ok((last, best))
+    }
+}

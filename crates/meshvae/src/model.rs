@@ -1,0 +1,445 @@
+//! [`MeshVae`]: the network (the paper's Fig. 2 as the authors' code runs it, see
+//! /work/shared/notes/authors-code.md §4).
+//!
+//! Encoder: the structure's convolutions and poolings on the hierarchy's levels (conv → batch
+//! norm → tanh; the last convolution without batch norm and, by default, linear), flatten
+//! `[B, V_L·C]` (index p·C + c), μ = hW_μ + b_μ, σ = √(2·sigmoid(hW_σ + b_σ)) ∈ (0, √2).
+//! Decoder: h = zW_μᵀ + b_dec (tied to the μ head), reshape `[B, V_L, C]`, the mirrored
+//! convolutions and de-poolings, all ending in tanh, so x̂ ∈ (−1, 1).
+
+mod file;
+mod layers;
+mod vars;
+
+use crate::batch_norm::BatchNorm;
+use crate::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
+use crate::error::{Result, VaeError};
+use crate::params::ParamCount;
+use crate::rng::Rng;
+use crate::structure::Layer;
+use candle_core::{DType, Device, Tensor, Var};
+use layers::{ConvBlock, Down, GraphConv, LevelOps, Up, Weights};
+use mesh_hierarchy::{Hierarchy, adjacency};
+use spectral_conv::{
+    ChebConv, DePool, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv, neighbour_mean_matrix,
+};
+use std::collections::BTreeMap;
+
+/// Train mode: batch norm uses (and updates the running statistics from) the batch.
+/// Eval mode: batch norm uses its running statistics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    Train,
+    Eval,
+}
+
+/// The encoder's output: the posterior q(z|x) = N(μ, diag σ²), both `[B, latent]`.
+#[derive(Debug, Clone)]
+pub struct Encoded {
+    pub mu: Tensor,
+    pub sigma: Tensor,
+}
+
+/// The mesh VAE on one hierarchy.
+#[derive(Debug, Clone)]
+pub struct MeshVae {
+    config: ModelConfig,
+    dtype: DType,
+    device: Device,
+    /// Vertex counts of the levels the network uses (0 ..= number of poolings).
+    vertex_counts: Vec<usize>,
+    trainable: BTreeMap<String, Var>,
+    state: BTreeMap<String, Var>,
+    /// Encoder blocks in order.
+    enc: Vec<ConvBlock>,
+    /// Decoder blocks in the order they run.
+    dec: Vec<ConvBlock>,
+    /// Per level: its convolution operator (and transpose for tied decoder convolutions).
+    levels: Vec<LevelOps>,
+    /// `down[i]`: level i → i + 1; `up[i]`: level i + 1 → i.
+    down: Vec<Down>,
+    up: Vec<Up>,
+    w_mu: Tensor,
+    b_mu: Tensor,
+    w_sigma: Tensor,
+    b_sigma: Tensor,
+    b_dec: Tensor,
+}
+
+fn var<'a>(map: &'a BTreeMap<String, Var>, name: &str) -> Result<&'a Var> {
+    map.get(name)
+        .ok_or_else(|| VaeError::shape("MeshVae::new", format!("variable {name} was not created")))
+}
+
+impl MeshVae {
+    /// An f32 model for `config` on `hierarchy` (built with `config.pooler()` and
+    /// `config.pool_levels()` pooling steps), every weight drawn from `Rng::new(seed)`.
+    pub fn new(
+        config: &ModelConfig,
+        hierarchy: &Hierarchy,
+        device: &Device,
+        seed: u64,
+    ) -> Result<Self> {
+        Self::with_dtype(config, hierarchy, device, DType::F32, seed)
+    }
+
+    /// As [`Self::new`] with f32 or f64 weights (f64 for gradient checks).
+    pub fn with_dtype(
+        config: &ModelConfig,
+        hierarchy: &Hierarchy,
+        device: &Device,
+        dtype: DType,
+        seed: u64,
+    ) -> Result<Self> {
+        config.validate()?;
+        if !matches!(dtype, DType::F32 | DType::F64) {
+            return Err(VaeError::argument(
+                "dtype",
+                format!("{dtype:?}; the model runs in f32 or f64"),
+            ));
+        }
+        check_hierarchy(config, hierarchy)?;
+        let n_levels = config.pool_levels() + 1;
+        let vertex_counts: Vec<usize> = hierarchy.vertex_counts()[..n_levels].to_vec();
+        let coarse = vertex_counts[n_levels - 1];
+        let plan = vars::plan(config, coarse);
+        let (trainable, state) =
+            vars::create(&plan, config.init_std, dtype, device, &mut Rng::new(seed))?;
+
+        let mut levels: Vec<LevelOps> = Vec::with_capacity(n_levels);
+        for (i, level) in hierarchy.levels[..n_levels].iter().enumerate() {
+            if i > 0 && config.pool == PoolKind::None {
+                // Every level is the template: share its operators.
+                levels.push(levels[0].clone());
+                continue;
+            }
+            let op = match config.conv {
+                ConvKind::Spectral => SparseOp::new(&level.laplacian, device)?,
+                ConvKind::Spatial => {
+                    let adj = adjacency(level.vertex_count, &level.faces);
+                    SparseOp::new(&neighbour_mean_matrix(&adj)?, device)?
+                }
+            };
+            let op_t = if config.tie_decoder_convs {
+                Some(op.transpose()?)
+            } else {
+                None
+            };
+            levels.push(LevelOps { op, op_t });
+        }
+
+        let block = |side: &str, spec: ConvSpec, own: bool| -> Result<ConvBlock> {
+            let weights = if own {
+                let names = vars::conv_weight_names(side, config.conv, spec.index);
+                let op = levels[spec.level].op.clone();
+                let w = |i: usize| -> Result<Tensor> {
+                    Ok(var(&trainable, &names[i])?.as_tensor().clone())
+                };
+                Weights::Own(match config.conv {
+                    ConvKind::Spectral => {
+                        GraphConv::Cheb(ChebConv::from_weights(op, config.k, w(0)?, None)?)
+                    }
+                    ConvKind::Spatial => {
+                        GraphConv::Spatial(SpatialConv::from_weights(op, w(0)?, w(1)?, None)?)
+                    }
+                })
+            } else {
+                Weights::Tied
+            };
+            let bn = if spec.batch_norm {
+                let [g, b, m, v] = vars::bn_names(side, spec.index);
+                Some(BatchNorm::new(
+                    var(&trainable, &g)?.clone(),
+                    var(&trainable, &b)?.clone(),
+                    var(&state, &m)?.clone(),
+                    var(&state, &v)?.clone(),
+                )?)
+            } else {
+                None
+            };
+            Ok(ConvBlock { spec, weights, bn })
+        };
+        let enc = config
+            .encoder_convs()
+            .into_iter()
+            .map(|s| block("enc", s, true))
+            .collect::<Result<Vec<_>>>()?;
+        let dec = config
+            .decoder_convs()
+            .into_iter()
+            .map(|s| block("dec", s, !config.tie_decoder_convs))
+            .collect::<Result<Vec<_>>>()?;
+
+        let (mut down, mut up) = (Vec::new(), Vec::new());
+        for op in &hierarchy.pooling[..n_levels - 1] {
+            let (d, u) = match config.pool {
+                PoolKind::Mean | PoolKind::Qem => (
+                    Down::Mean(MeanPool::new(&op.pool, device)?),
+                    Up::DePool(DePool::new(&op.depool, device)?),
+                ),
+                PoolKind::Max => (
+                    Down::Max(MaxPool::new(&op.pool, device)?),
+                    Up::DePool(DePool::new(&op.depool, device)?),
+                ),
+                PoolKind::Sampling => (
+                    Down::Sampling(Sampling::new(&op.pool, device)?),
+                    Up::Sampling(Sampling::new(&op.depool, device)?),
+                ),
+                PoolKind::None => (Down::Identity, Up::Identity),
+            };
+            down.push(d);
+            up.push(u);
+        }
+
+        let t = |name: &str| -> Result<Tensor> { Ok(var(&trainable, name)?.as_tensor().clone()) };
+        Ok(Self {
+            w_mu: t("enc.mu.weight")?,
+            b_mu: t("enc.mu.bias")?,
+            w_sigma: t("enc.sigma.weight")?,
+            b_sigma: t("enc.sigma.bias")?,
+            b_dec: t("dec.fc.bias")?,
+            config: config.clone(),
+            dtype,
+            device: device.clone(),
+            vertex_counts,
+            trainable,
+            state,
+            enc,
+            dec,
+            levels,
+            down,
+            up,
+        })
+    }
+
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
+    /// Vertices of the template (the input's V).
+    pub fn vertex_count(&self) -> usize {
+        self.vertex_counts[0]
+    }
+
+    /// Vertices of every level the network uses, template first.
+    pub fn vertex_counts(&self) -> &[usize] {
+        &self.vertex_counts
+    }
+
+    pub fn latent(&self) -> usize {
+        self.config.latent
+    }
+
+    pub fn dtype(&self) -> DType {
+        self.dtype
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The trained variables, sorted by name (the order the optimiser and the L2 term use).
+    pub fn trainable_vars(&self) -> Vec<(String, Var)> {
+        self.trainable
+            .iter()
+            .map(|(n, v)| (n.clone(), v.clone()))
+            .collect()
+    }
+
+    /// The batch norms' running means and variances, sorted by name.
+    pub fn state_vars(&self) -> Vec<(String, Var)> {
+        self.state
+            .iter()
+            .map(|(n, v)| (n.clone(), v.clone()))
+            .collect()
+    }
+
+    /// Weights and biases (BN γ, β count as biases) actually created.
+    pub fn param_count(&self) -> ParamCount {
+        let (mut with_biases, mut without_biases) = (0, 0);
+        for (name, v) in &self.trainable {
+            let n = v.elem_count();
+            with_biases += n;
+            if !vars::is_bias(name) {
+                without_biases += n;
+            }
+        }
+        ParamCount {
+            with_biases,
+            without_biases,
+        }
+    }
+
+    /// μ and σ `[B, latent]` of features x `[B, V, 9]`.
+    pub fn encode(&self, x: &Tensor, mode: Mode) -> Result<Encoded> {
+        self.check_input("MeshVae::encode", x)?;
+        let mut h = x.clone();
+        let (mut level, mut blocks) = (0, self.enc.iter());
+        for layer in self.config.structure.layers() {
+            match layer {
+                Layer::Conv => {
+                    let block = blocks.next().ok_or_else(|| self.plan_error())?;
+                    h = block.forward(&h, mode, None)?;
+                }
+                Layer::Pool => {
+                    h = self.down[level].forward(&h)?;
+                    level += 1;
+                }
+            }
+        }
+        let batch = h.dim(0)?;
+        let flat = h.reshape((batch, self.flat_width()))?;
+        let mu = flat.matmul(&self.w_mu)?.broadcast_add(&self.b_mu)?;
+        let s = flat.matmul(&self.w_sigma)?.broadcast_add(&self.b_sigma)?;
+        let sigma = (candle_nn::ops::sigmoid(&s)? * 2.0)?.sqrt()?;
+        Ok(Encoded { mu, sigma })
+    }
+
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]`.
+    pub fn decode(&self, z: &Tensor, mode: Mode) -> Result<Tensor> {
+        let batch = self.check_latent("MeshVae::decode", z, None)?;
+        let coarse = self.vertex_counts[self.vertex_counts.len() - 1];
+        let mut h = self
+            .decoder_fc(z)?
+            .reshape((batch, coarse, self.config.channels))?;
+        let (mut level, mut blocks) = (self.vertex_counts.len() - 1, self.dec.iter());
+        for layer in self.config.structure.layers().iter().rev() {
+            match layer {
+                Layer::Conv => {
+                    let block = blocks.next().ok_or_else(|| self.plan_error())?;
+                    let tied = self.tied_conv(block)?;
+                    h = block.forward(&h, mode, tied.as_ref())?;
+                }
+                Layer::Pool => {
+                    level -= 1;
+                    h = self.up[level].forward(&h)?;
+                }
+            }
+        }
+        Ok(h)
+    }
+
+    /// x̂ and the posterior for features x `[B, V, 9]` and noise ε `[B, latent]`:
+    /// z = μ + σ ⊙ ε.
+    pub fn forward(&self, x: &Tensor, eps: &Tensor, mode: Mode) -> Result<(Tensor, Encoded)> {
+        let encoded = self.encode(x, mode)?;
+        self.check_latent("MeshVae::forward (eps)", eps, Some(encoded.mu.dim(0)?))?;
+        let z = (&encoded.mu + (&encoded.sigma * eps)?)?;
+        Ok((self.decode(&z, mode)?, encoded))
+    }
+
+    /// The deterministic reconstruction decode(μ) in eval mode.
+    pub fn reconstruct(&self, x: &Tensor) -> Result<Tensor> {
+        let encoded = self.encode(x, Mode::Eval)?;
+        self.decode(&encoded.mu, Mode::Eval)
+    }
+
+    /// The decoder's dense layer: zW_μᵀ + b_dec `[B, V_L·C]`.
+    pub(crate) fn decoder_fc(&self, z: &Tensor) -> Result<Tensor> {
+        Ok(z.matmul(&self.w_mu.t()?)?.broadcast_add(&self.b_dec)?)
+    }
+
+    /// The adjoint of the mirror encoder convolution, for a tied decoder block.
+    fn tied_conv(&self, block: &ConvBlock) -> Result<Option<GraphConv>> {
+        if !matches!(block.weights, Weights::Tied) {
+            return Ok(None);
+        }
+        let enc = &self.enc[block.spec.index];
+        let (Weights::Own(conv), Some(op_t)) = (&enc.weights, &self.levels[block.spec.level].op_t)
+        else {
+            return Err(self.plan_error());
+        };
+        Ok(Some(conv.adjoint(op_t)?))
+    }
+
+    fn flat_width(&self) -> usize {
+        self.vertex_counts[self.vertex_counts.len() - 1] * self.config.channels
+    }
+
+    fn plan_error(&self) -> VaeError {
+        VaeError::shape(
+            "MeshVae",
+            format!("internal: layers do not match {}", self.config.structure),
+        )
+    }
+
+    fn check_input(&self, op: &'static str, x: &Tensor) -> Result<()> {
+        let v = self.vertex_count();
+        let ok_shape = matches!(x.dims(), &[b, xv, c] if b > 0 && xv == v && c == FEATURE_CHANNELS);
+        if !ok_shape {
+            return Err(VaeError::shape(
+                op,
+                format!(
+                    "features of shape {:?}; the model expects [B ≥ 1, {v}, {FEATURE_CHANNELS}]",
+                    x.dims()
+                ),
+            ));
+        }
+        self.check_kind(op, x)
+    }
+
+    /// Checks z (or ε) is `[B, latent]` (with B = `batch` if given) and returns B.
+    fn check_latent(&self, op: &'static str, z: &Tensor, batch: Option<usize>) -> Result<usize> {
+        let latent = self.config.latent;
+        match z.dims() {
+            &[b, l] if b > 0 && l == latent && batch.is_none_or(|want| want == b) => {
+                self.check_kind(op, z)?;
+                Ok(b)
+            }
+            dims => Err(VaeError::shape(
+                op,
+                format!(
+                    "shape {dims:?}; expected [{}, {latent}]",
+                    batch.map_or("B ≥ 1".to_owned(), |b| b.to_string())
+                ),
+            )),
+        }
+    }
+
+    fn check_kind(&self, op: &'static str, t: &Tensor) -> Result<()> {
+        if t.dtype() != self.dtype || !t.device().same_device(&self.device) {
+            return Err(VaeError::shape(
+                op,
+                format!(
+                    "tensor of {:?} on {:?}; the model is {:?} on {:?}",
+                    t.dtype(),
+                    t.device().location(),
+                    self.dtype,
+                    self.device.location()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The hierarchy must have the structure's pooling steps, built by the configured pooler.
+fn check_hierarchy(config: &ModelConfig, h: &Hierarchy) -> Result<()> {
+    h.check_shapes()
+        .map_err(|what| VaeError::argument("hierarchy", what))?;
+    let need = config.pool_levels();
+    if h.pooling.len() < need {
+        return Err(VaeError::argument(
+            "hierarchy",
+            format!(
+                "has {} pooling steps; structure {} needs {need}",
+                h.pooling.len(),
+                config.structure
+            ),
+        ));
+    }
+    let pooler = config.pooler();
+    if let Some(op) = h.pooling[..need].iter().find(|op| op.kind != pooler) {
+        return Err(VaeError::argument(
+            "hierarchy",
+            format!(
+                "built with pooler {}; the model's pool {} needs {pooler}",
+                op.kind, config.pool
+            ),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

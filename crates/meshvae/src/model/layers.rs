@@ -1,0 +1,145 @@
+//! The building blocks of [`super::MeshVae`]: graph convolutions (own weights or the adjoint of
+//! an encoder convolution), convolution blocks (conv → batch norm → tanh) and the pooling and
+//! de-pooling between levels.
+
+use super::Mode;
+use crate::batch_norm::BatchNorm;
+use crate::config::ConvSpec;
+use crate::error::{Result, VaeError};
+use candle_core::Tensor;
+use spectral_conv::{ChebConv, DePool, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv};
+
+/// The sparse operators of one level: the convolution's operator A (L̃ for spectral, D⁻¹A for
+/// spatial convolutions) and, when decoder convolutions are tied, Aᵀ for their adjoints.
+#[derive(Debug, Clone)]
+pub(crate) struct LevelOps {
+    pub op: SparseOp,
+    pub op_t: Option<SparseOp>,
+}
+
+/// A graph convolution with weights (no bias: batch norm's β is the layers' only offset).
+#[derive(Debug, Clone)]
+pub(crate) enum GraphConv {
+    Cheb(ChebConv),
+    Spatial(SpatialConv),
+}
+
+impl GraphConv {
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(match self {
+            Self::Cheb(c) => c.forward(x)?,
+            Self::Spatial(c) => c.forward(x)?,
+        })
+    }
+
+    /// The adjoint convolution (⟨conv x, y⟩ = ⟨x, adjoint y⟩) on `op_t` = Aᵀ, built from the
+    /// current weights (differentiably, so gradients reach them):
+    /// - Chebyshev: Σ_k T_k(L̃) X W_k ↦ Σ_k T_k(L̃ᵀ) Y W_kᵀ, i.e. the per-order blocks of W
+    ///   transposed: row fin·K + k, column o → row o·K + k, column fin;
+    /// - spatial: X W_s + M X W_n ↦ Y W_sᵀ + Mᵀ Y W_nᵀ.
+    pub fn adjoint(&self, op_t: &SparseOp) -> Result<Self> {
+        Ok(match self {
+            Self::Cheb(c) => {
+                let (k, c_in, c_out) = (c.k(), c.c_in(), c.c_out());
+                let w = c
+                    .weight()
+                    .reshape((c_in, k, c_out))?
+                    .permute((2, 1, 0))?
+                    .contiguous()?
+                    .reshape((c_out * k, c_in))?;
+                Self::Cheb(ChebConv::from_weights(op_t.clone(), k, w, None)?)
+            }
+            Self::Spatial(c) => Self::Spatial(SpatialConv::from_weights(
+                op_t.clone(),
+                c.w_self().t()?.contiguous()?,
+                c.w_nb().t()?.contiguous()?,
+                None,
+            )?),
+        })
+    }
+}
+
+/// Where a convolution block's weights come from.
+#[derive(Debug, Clone)]
+pub(crate) enum Weights {
+    Own(GraphConv),
+    /// The adjoint of encoder convolution `spec.index` (tied decoder convolutions).
+    Tied,
+}
+
+/// conv → optional batch norm → optional tanh.
+#[derive(Debug, Clone)]
+pub(crate) struct ConvBlock {
+    pub spec: ConvSpec,
+    pub weights: Weights,
+    pub bn: Option<BatchNorm>,
+}
+
+impl ConvBlock {
+    /// Runs the block; `tied` supplies the convolution of a [`Weights::Tied`] block.
+    pub fn forward(&self, x: &Tensor, mode: Mode, tied: Option<&GraphConv>) -> Result<Tensor> {
+        let y = self.linear(x, tied)?;
+        let y = match &self.bn {
+            Some(bn) => bn.forward(&y, mode)?,
+            None => y,
+        };
+        Ok(if self.spec.tanh {
+            crate::ops::tanh(&y)?
+        } else {
+            y
+        })
+    }
+
+    /// The convolution alone (no batch norm, no activation).
+    pub fn linear(&self, x: &Tensor, tied: Option<&GraphConv>) -> Result<Tensor> {
+        match (&self.weights, tied) {
+            (Weights::Own(conv), _) => conv.forward(x),
+            (Weights::Tied, Some(conv)) => conv.forward(x),
+            (Weights::Tied, None) => Err(VaeError::shape(
+                "ConvBlock::forward",
+                format!(
+                    "tied convolution {} without its encoder weights",
+                    self.spec.index
+                ),
+            )),
+        }
+    }
+}
+
+/// Pooling from level i to level i + 1.
+#[derive(Debug, Clone)]
+pub(crate) enum Down {
+    Mean(MeanPool),
+    Max(MaxPool),
+    Sampling(Sampling),
+    Identity,
+}
+
+impl Down {
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(match self {
+            Self::Mean(p) => p.forward(x)?,
+            Self::Max(p) => p.forward(x)?,
+            Self::Sampling(p) => p.forward(x)?,
+            Self::Identity => x.clone(),
+        })
+    }
+}
+
+/// De-pooling from level i + 1 back to level i.
+#[derive(Debug, Clone)]
+pub(crate) enum Up {
+    DePool(DePool),
+    Sampling(Sampling),
+    Identity,
+}
+
+impl Up {
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(match self {
+            Self::DePool(p) => p.forward(x)?,
+            Self::Sampling(p) => p.forward(x)?,
+            Self::Identity => x.clone(),
+        })
+    }
+}

@@ -1,0 +1,435 @@
+//! Training: a mesh set in, a model folder out (see [`crate::folder`]).
+//!
+//! Each epoch shuffles the training meshes, takes Adam steps on batches, measures the test loss
+//! (the authors' validation loss: w_rec · mean squared error with z = μ and batch norm in
+//! inference mode, here a true mean over the test meshes), appends a line to `log.jsonl`, keeps
+//! the weights with the lowest test loss in `weights.safetensors` and writes the whole state to
+//! `checkpoint.safetensors`. Killing the process at any moment loses at most the running epoch:
+//! `resume` restarts from the checkpoint, and because every random draw comes from one seeded
+//! stream saved with it, the resumed run ends with the same weights as an uninterrupted one.
+
+use crate::adam::Adam;
+use crate::checkpoint::{Checkpoint, Progress};
+use crate::config::ModelConfig;
+use crate::data::MeshData;
+use crate::error::{Result, VaeError};
+use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, TrainConfig, VERSION};
+use crate::loss::LossWeights;
+use crate::model::MeshVae;
+use crate::rng::Rng;
+use crate::split::Split;
+use candle_core::Device;
+use deform_features::FeatureOptions;
+use indicatif::{ProgressBar, ProgressStyle};
+use mesh_hierarchy::{Hierarchy, HierarchyConfig};
+use mesh_io::MeshSet;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to train on and with which settings.
+#[derive(Debug, Clone)]
+pub struct TrainRequest<'a> {
+    pub set: &'a MeshSet,
+    /// Where the set came from (recorded so that `eval` can find it again).
+    pub source: Option<PathBuf>,
+    pub out: PathBuf,
+    pub model: ModelConfig,
+    pub train: TrainConfig,
+    pub features: FeatureOptions,
+    /// Ratio, λmax and de-pooling of the hierarchy; its pooler and level count are taken from
+    /// the model configuration.
+    pub hierarchy: HierarchyConfig,
+    /// Explicit split; `None` draws one from `train.seed` and `train.test_fraction`.
+    pub split: Option<Split>,
+}
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct TrainOptions {
+    /// Continue the model in `out` from its checkpoint (settings must match, epochs may grow).
+    pub resume: bool,
+    /// Replace a model already in `out`.
+    pub force: bool,
+    /// Draw a progress bar on stderr.
+    pub progress: bool,
+    pub device: Device,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            resume: false,
+            force: false,
+            progress: false,
+            device: Device::Cpu,
+        }
+    }
+}
+
+/// One line of `log.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochRecord {
+    pub epoch: usize,
+    /// Mean over the epoch's training meshes of the total loss and of its weighted terms.
+    pub train_loss: f64,
+    pub rec: f64,
+    pub kl: f64,
+    pub l2: f64,
+    /// Validation loss on the test meshes (none if the split has no test meshes).
+    pub test_loss: Option<f64>,
+    pub seconds: f64,
+}
+
+/// The outcome of [`train`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainSummary {
+    /// Epochs run by this call (0 if the checkpoint had already reached the target).
+    pub epochs_run: usize,
+    pub epochs_total: usize,
+    pub last: Option<EpochRecord>,
+    pub best_epoch: usize,
+    pub best_loss: f64,
+    pub seconds: f64,
+}
+
+/// The hierarchy settings a model configuration needs.
+pub fn hierarchy_config(model: &ModelConfig, base: HierarchyConfig) -> HierarchyConfig {
+    HierarchyConfig {
+        pooler: model.pooler(),
+        levels: model.pool_levels(),
+        ..base
+    }
+}
+
+/// Derives the training stream's seed from the user's (the split and the initial weights use
+/// the seed itself).
+fn stream_seed(seed: u64) -> u64 {
+    seed ^ 0x7261_696E_5F73_6565
+}
+
+/// Trains (or resumes) a model; `on_epoch` sees every finished epoch.
+pub fn train(
+    request: &TrainRequest,
+    options: &TrainOptions,
+    mut on_epoch: impl FnMut(&EpochRecord),
+) -> Result<TrainSummary> {
+    let start = Instant::now();
+    request.train.validate()?;
+    let folder = ModelFolder::new(&request.out);
+    let device = &options.device;
+    let hierarchy_config = hierarchy_config(&request.model, request.hierarchy);
+
+    let (spec, hierarchy, data) = if options.resume {
+        resume_setup(request, &folder, hierarchy_config)?
+    } else {
+        fresh_setup(request, &folder, options.force, hierarchy_config)?
+    };
+
+    let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
+    let mut adam = Adam::new(model.trainable_vars(), spec.train.lr)?;
+    let mut progress = Progress {
+        epoch: 0,
+        rng: Rng::new(stream_seed(spec.train.seed)).state(),
+        best_loss: f64::INFINITY,
+        best_epoch: 0,
+    };
+    if options.resume && folder.checkpoint().is_file() {
+        progress = Checkpoint::load(&folder.checkpoint(), &mut model, &mut adam)?;
+    }
+    truncate_log(&folder.log(), progress.epoch)?;
+    let mut rng = Rng::from_state(progress.rng)?;
+
+    let epochs = spec.train.epochs;
+    let batch = spec.train.batch;
+    let train_ids = &data.split.train;
+    let steps_per_epoch = train_ids.len().div_ceil(batch);
+    let bar = progress_bar(options.progress, epochs, progress.epoch, steps_per_epoch);
+    let mut last = None;
+    let mut epochs_run = 0;
+
+    for epoch in progress.epoch + 1..=epochs {
+        let t0 = Instant::now();
+        let mut order = train_ids.clone();
+        rng.shuffle(&mut order);
+        let mut sums = [0.0f64; 4];
+        for chunk in order.chunks(batch) {
+            let x = data.batch(chunk, device)?;
+            let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
+            let loss = model.loss(&x, &eps, &spec.train.loss)?;
+            let total = loss
+                .total
+                .to_dtype(candle_core::DType::F64)?
+                .to_scalar::<f64>()?;
+            if !total.is_finite() {
+                bar.abandon();
+                return Err(VaeError::Diverged(format!(
+                    "epoch {epoch}: the loss is {total} (rec {}, kl {}, l2 {}); the checkpoint \
+                     of epoch {} is kept — try a smaller learning rate",
+                    loss.rec, loss.kl, loss.l2, progress.epoch
+                )));
+            }
+            let grads = loss.total.backward()?;
+            adam.step(&grads)?;
+            let w = chunk.len() as f64;
+            for (s, v) in sums.iter_mut().zip([total, loss.rec, loss.kl, loss.l2]) {
+                *s += v * w;
+            }
+            bar.inc(1);
+        }
+        let n = train_ids.len().max(1) as f64;
+        let test_loss = validation_loss(
+            &model,
+            &data,
+            &data.split.test,
+            batch,
+            &spec.train.loss,
+            device,
+        )?;
+        let record = EpochRecord {
+            epoch,
+            train_loss: sums[0] / n,
+            rec: sums[1] / n,
+            kl: sums[2] / n,
+            l2: sums[3] / n,
+            test_loss,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        // Without test meshes the best model is the one with the lowest training loss.
+        let score = test_loss.unwrap_or(record.train_loss);
+        if score < progress.best_loss {
+            model.save(&folder.weights())?;
+            progress.best_loss = score;
+            progress.best_epoch = epoch;
+        }
+        progress.epoch = epoch;
+        progress.rng = rng.state();
+        append_log(&folder.log(), &record)?;
+        Checkpoint::save(&folder.checkpoint(), &model, &adam, &progress)?;
+        bar.set_message(format!(
+            "epoch {epoch}/{epochs}  loss {:.3}  test {}",
+            record.train_loss,
+            test_loss.map_or("–".into(), |t| format!("{t:.3}"))
+        ));
+        on_epoch(&record);
+        last = Some(record);
+        epochs_run += 1;
+    }
+    bar.finish();
+    Ok(TrainSummary {
+        epochs_run,
+        epochs_total: epochs,
+        last,
+        best_epoch: progress.best_epoch,
+        best_loss: progress.best_loss,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// w_rec · mean over `ids` of the squared error with z = μ (inference mode), or `None`.
+pub fn validation_loss(
+    model: &MeshVae,
+    data: &MeshData,
+    ids: &[usize],
+    batch: usize,
+    weights: &LossWeights,
+    device: &Device,
+) -> Result<Option<f64>> {
+    if ids.is_empty() {
+        return Ok(None);
+    }
+    let mut sum = 0.0;
+    for chunk in ids.chunks(batch.max(1)) {
+        let x = data.batch(chunk, device)?;
+        sum += model.rec_error(&x, weights)? * chunk.len() as f64;
+    }
+    Ok(Some(sum / ids.len() as f64))
+}
+
+fn fresh_setup(
+    request: &TrainRequest,
+    folder: &ModelFolder,
+    force: bool,
+    hierarchy_config: HierarchyConfig,
+) -> Result<(ModelSpec, Hierarchy, MeshData)> {
+    prepare_out_dir(folder, force)?;
+    let set = request.set;
+    let split = match &request.split {
+        Some(s) => {
+            s.check(set.len())?;
+            s.clone()
+        }
+        None => Split::random(set.len(), request.train.test_fraction, request.train.seed)?,
+    };
+    let template = set.template();
+    let hierarchy = Hierarchy::build(&template, &hierarchy_config)?;
+    let data = MeshData::prepare(set, split, request.features)?;
+    let spec = ModelSpec {
+        format: FORMAT.into(),
+        version: VERSION,
+        model: request.model.clone(),
+        train: request.train.clone(),
+        features: request.features,
+        hierarchy: hierarchy_config,
+        vertices: set.vertex_count(),
+        faces: set.faces().len(),
+        names: set.names().to_vec(),
+        source: request.source.clone(),
+    };
+    // The config goes last: a folder without it is not (yet) a model.
+    hierarchy.save(&folder.hierarchy())?;
+    folder.write_json(&folder.normalization(), &data.normalization)?;
+    folder.write_json(&folder.split(), &SplitFile::new(&data.split, set.names()))?;
+    mesh_io::write_mesh(&folder.template(), &template)?;
+    folder.write_json(&folder.config(), &spec)?;
+    Ok((spec, hierarchy, data))
+}
+
+fn resume_setup(
+    request: &TrainRequest,
+    folder: &ModelFolder,
+    hierarchy_config: HierarchyConfig,
+) -> Result<(ModelSpec, Hierarchy, MeshData)> {
+    let mut spec = folder.read_spec()?;
+    let template = mesh_io::read_mesh(&folder.template())?.value;
+    spec.check_set(request.set, &template, &folder.dir)?;
+    let mut differences = Vec::new();
+    if spec.model != request.model {
+        differences.push("model");
+    }
+    if spec.features != request.features {
+        differences.push("features");
+    }
+    if spec.hierarchy != hierarchy_config {
+        differences.push("hierarchy");
+    }
+    if spec.names != request.set.names() {
+        differences.push("mesh names");
+    }
+    let (a, b) = (&spec.train, &request.train);
+    if (a.batch, a.lr, a.seed, a.loss, a.test_fraction)
+        != (b.batch, b.lr, b.seed, b.loss, b.test_fraction)
+    {
+        differences.push("training settings other than epochs");
+    }
+    if !differences.is_empty() {
+        return Err(VaeError::model(
+            &folder.dir,
+            format!(
+                "cannot resume: the {} differ from this model's (only --epochs may change)",
+                differences.join(", ")
+            ),
+        ));
+    }
+    if spec.train.epochs != request.train.epochs {
+        spec.train.epochs = request.train.epochs;
+        folder.write_json(&folder.config(), &spec)?;
+    }
+    let hierarchy = Hierarchy::load(&folder.hierarchy())?;
+    let normalization = folder.read_json(&folder.normalization())?;
+    let split_file: SplitFile = folder.read_json(&folder.split())?;
+    let split = Split {
+        train: split_file.train,
+        test: split_file.test,
+    };
+    split.check(request.set.len())?;
+    let features = deform_features::extract_features(request.set, spec.features)?;
+    let data =
+        MeshData::with_normalization(features.features, split, normalization, features.warnings);
+    Ok((spec, hierarchy, data))
+}
+
+/// Creates `out`, refusing to overwrite a model (or any non-empty folder) unless `force`.
+fn prepare_out_dir(folder: &ModelFolder, force: bool) -> Result<()> {
+    let dir = &folder.dir;
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(VaeError::model(dir, "exists and is not a folder"));
+        }
+        let non_empty = std::fs::read_dir(dir)
+            .map_err(|e| VaeError::io(dir, e))?
+            .next()
+            .is_some();
+        if non_empty && !force {
+            let what = if folder.has_model() {
+                "already holds a model; pass --resume to continue it or --force to replace it"
+            } else {
+                "is not empty; choose a new folder or pass --force"
+            };
+            return Err(VaeError::model(dir, what));
+        }
+        if force {
+            for path in [
+                folder.config(),
+                folder.checkpoint(),
+                folder.weights(),
+                folder.log(),
+                folder.hierarchy(),
+                folder.normalization(),
+                folder.split(),
+                folder.template(),
+            ] {
+                if path.exists() {
+                    std::fs::remove_file(&path).map_err(|e| VaeError::io(&path, e))?;
+                }
+            }
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| VaeError::io(dir, e))
+}
+
+fn append_log(path: &Path, record: &EpochRecord) -> Result<()> {
+    let line = serde_json::to_string(record).map_err(|e| VaeError::model(path, e.to_string()))?;
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| VaeError::io(path, e))?;
+    writeln!(file, "{line}").map_err(|e| VaeError::io(path, e))
+}
+
+/// Keeps the log lines of epochs up to `epoch` (a killed run may have logged one more).
+fn truncate_log(path: &Path, epoch: usize) -> Result<()> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| VaeError::io(path, e))?;
+    let kept: String = text
+        .lines()
+        .filter(|line| serde_json::from_str::<EpochRecord>(line).is_ok_and(|r| r.epoch <= epoch))
+        .map(|line| format!("{line}\n"))
+        .collect();
+    if kept != text {
+        mesh_io::atomic::write_bytes_atomic(path, kept.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Reads `log.jsonl`.
+pub fn read_log(path: &Path) -> Result<Vec<EpochRecord>> {
+    let text = std::fs::read_to_string(path).map_err(|e| VaeError::io(path, e))?;
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .enumerate()
+        .map(|(i, line)| {
+            serde_json::from_str(line)
+                .map_err(|e| VaeError::model(path, format!("line {}: {e}", i + 1)))
+        })
+        .collect()
+}
+
+fn progress_bar(show: bool, epochs: usize, done: usize, steps: usize) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new((epochs * steps) as u64);
+    bar.set_position((done * steps) as u64);
+    if let Ok(style) = ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
+    ) {
+        bar.set_style(style);
+    }
+    bar.set_message(format!("epoch {done}/{epochs}"));
+    bar
+}
