@@ -71,6 +71,10 @@ pub struct TrainArgs {
     /// Replace a model already in --out.
     #[arg(long)]
     force: bool,
+    /// Write the checkpoint at most this often (and after the last epoch); a kill loses at
+    /// most this much training.
+    #[arg(long, default_value_t = 60.0)]
+    checkpoint_seconds: f64,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -178,6 +182,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         resume: args.resume,
         force: args.force,
         progress: !args.quiet,
+        checkpoint_seconds: args.checkpoint_seconds,
         device: Device::Cpu,
     };
     let summary = meshvae::train(&request, &options, |_| {})?;

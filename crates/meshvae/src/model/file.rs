@@ -76,9 +76,15 @@ impl MeshVae {
 
     /// Writes every variable and the configuration to `path` (atomically).
     pub fn save(&self, path: &Path) -> Result<()> {
+        self.save_snapshot(&self.tensors()?, path)
+    }
+
+    /// Writes `tensors` (taken earlier by [`Self::tensors`], e.g. the best epoch's) as this
+    /// model's weights file.
+    pub fn save_snapshot(&self, tensors: &BTreeMap<String, Tensor>, path: &Path) -> Result<()> {
         let config = serde_json::to_string(&self.config)
             .map_err(|e| VaeError::model(path, format!("config to JSON: {e}")))?;
-        let bytes = serialize(&self.tensors()?, &config)?;
+        let bytes = serialize(tensors, &config)?;
         mesh_io::atomic::write_atomic(path, |w| w.write_all(&bytes))?;
         Ok(())
     }
