@@ -170,3 +170,18 @@ fn not_a_model_folder_and_bad_settings_are_typed_errors() {
     assert!(err.to_string().contains("lr"), "{err}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn a_non_finite_loss_stops_training_with_a_message() {
+    let set = small_set(3, 8);
+    let out = scratch("nan");
+    let mut req = request(&set, &out, 3);
+    // The weighted reconstruction term overflows f32: the loss is infinite at the first step.
+    req.train.loss.rec = 1e38;
+    let err = train(&req, &options(false, false), |_| {}).unwrap_err();
+    assert!(matches!(err, VaeError::Diverged(_)), "{err}");
+    let text = err.to_string();
+    assert!(text.contains("epoch 1") && text.contains("inf"), "{text}");
+    assert!(!ModelFolder::new(&out).weights().exists());
+    let _ = std::fs::remove_dir_all(&out);
+}
