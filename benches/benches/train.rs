@@ -45,9 +45,10 @@ fn step(c: &mut Criterion) {
                 let eps = rng
                     .normal_tensor((BATCH, config.latent), &device)
                     .expect("eps");
-                let loss = model.loss(&x, &eps, &weights).expect("loss");
+                // As `meshvae::train` does: the L2 gradient is applied by Adam.
+                let loss = model.training_loss(&x, &eps, &weights).expect("loss");
                 let grads = loss.total.backward().expect("backward");
-                adam.step(&grads).expect("adam");
+                adam.step_with_l2(&grads, weights.l2).expect("adam");
             })
         });
         group.finish();

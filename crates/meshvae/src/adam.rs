@@ -113,6 +113,14 @@ impl Adam {
 
     /// One update from `grads`; variables without a gradient are left alone (moments too).
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.step_with_l2(grads, 0.0)
+    }
+
+    /// One update from `grads` plus the gradient `l2 · θ` of an L2 term `l2 · ½‖θ‖²` that was
+    /// left out of the autograd graph (see `MeshVae::training_loss`): the same step as
+    /// [`Self::step`] on the full loss, without autograd holding a parameter-sized L2 gradient
+    /// (and its sum with the others) for every variable at once.
+    pub fn step_with_l2(&mut self, grads: &GradStore, l2: f64) -> Result<()> {
         self.step += 1;
         let AdamConfig {
             lr,
@@ -126,6 +134,13 @@ impl Adam {
         for slot in &self.slots {
             let Some(g) = grads.get(&slot.var) else {
                 continue;
+            };
+            let with_l2;
+            let g = if l2 != 0.0 {
+                with_l2 = (g + slot.var.as_tensor().affine(l2, 0.0)?)?;
+                &with_l2
+            } else {
+                g
             };
             if crate::ops::fusable(g) && g.dtype() == slot.var.dtype() {
                 // In place, three passes, no allocation (the same arithmetic as below).

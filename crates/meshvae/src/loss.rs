@@ -100,6 +100,33 @@ impl MeshVae {
         })
     }
 
+    /// As [`Self::loss`], but with the L2 term outside the autograd graph: `total` = rec + kl
+    /// is what to differentiate, and `l2` (its value) is reported only. Train with
+    /// `Adam::step_with_l2(grads, weights.l2)`, which adds the L2 gradient w_l2·θ itself: the same
+    /// update, without autograd keeping an L2 gradient the size of every parameter (≈ 0.4 GB on
+    /// elephant-gallop).
+    pub fn training_loss(&self, x: &Tensor, eps: &Tensor, weights: &LossWeights) -> Result<Loss> {
+        let (x_hat, encoded) = self.forward(x, eps, Mode::Train)?;
+        let rec = (mean_sse(x, &x_hat)? * weights.rec)?;
+        let kl = (mean_kl(&encoded)? * weights.kl)?;
+        let l2 = if weights.l2 == 0.0 {
+            0.0
+        } else {
+            let mut sum = 0.0;
+            for (_, v) in self.trainable_vars() {
+                sum += scalar(&crate::ops::half_sum_sq(&v.as_tensor().detach())?)?;
+            }
+            sum * weights.l2
+        };
+        let total = (&rec + &kl)?;
+        Ok(Loss {
+            rec: scalar(&rec)?,
+            kl: scalar(&kl)?,
+            l2,
+            total,
+        })
+    }
+
     /// The validation loss: w_rec · mean_b Σ (x − x̂)² with x̂ = decode(μ) in eval mode (the
     /// authors' `:130`). Sum these × B over batches and divide by the count for a true mean.
     pub fn rec_error(&self, x: &Tensor, weights: &LossWeights) -> Result<f64> {

@@ -167,11 +167,13 @@ pub fn train(
         for chunk in order.chunks(batch) {
             let x = data.batch(chunk, device)?;
             let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
-            let loss = model.loss(&x, &eps, &spec.train.loss)?;
+            // The L2 term's gradient is applied by Adam (see `MeshVae::training_loss`).
+            let loss = model.training_loss(&x, &eps, &spec.train.loss)?;
             let total = loss
                 .total
                 .to_dtype(candle_core::DType::F64)?
-                .to_scalar::<f64>()?;
+                .to_scalar::<f64>()?
+                + loss.l2;
             if !total.is_finite() {
                 bar.abandon();
                 return Err(VaeError::Diverged(format!(
@@ -181,7 +183,7 @@ pub fn train(
                 )));
             }
             let grads = loss.total.backward()?;
-            adam.step(&grads)?;
+            adam.step_with_l2(&grads, spec.train.loss.l2)?;
             let w = chunk.len() as f64;
             for (s, v) in sums.iter_mut().zip([total, loss.rec, loss.kl, loss.l2]) {
                 *s += v * w;
