@@ -1,22 +1,11 @@
 //! The `meshvae` binary on good and bad mesh sets: counts, messages, exit codes.
 
+mod common;
+
+use common::{meshvae, scratch};
 use mesh_io::datasets;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn meshvae(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meshvae"))
-        .args(args)
-        .output()
-        .expect("the meshvae binary runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("meshvae-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use std::path::Path;
+use std::process::Output;
 
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()

@@ -1,21 +1,10 @@
 //! `meshvae train`, `eval`, `reconstruct` end to end on a small synthetic set.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn meshvae(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meshvae"))
-        .args(args)
-        .output()
-        .expect("the meshvae binary runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("meshvae-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use common::{meshvae, scratch};
+use std::path::Path;
+use std::process::Output;
 
 fn ok(out: &Output) -> String {
     let err = String::from_utf8_lossy(&out.stderr);
