@@ -127,6 +127,9 @@ fn set_model(path: &Path, map: &HashMap<String, Tensor>, model: &mut MeshVae) ->
     Ok(())
 }
 
+/// candle's `safetensors::save` writes tensor by tensor, without first building the whole file
+/// in memory (a checkpoint of elephant-gallop is ~600 MB), but not atomically: so it writes a
+/// hidden temporary file beside `path` and renames it.
 fn save_atomic(path: &Path, map: &HashMap<String, Tensor>) -> Result<()> {
     let file_name = path
         .file_name()
@@ -135,7 +138,13 @@ fn save_atomic(path: &Path, map: &HashMap<String, Tensor>) -> Result<()> {
     let tmp = path.with_file_name(format!(".{file_name}.tmp"));
     let result = candle_core::safetensors::save(map, &tmp)
         .map_err(VaeError::from)
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| VaeError::io(path, e)));
+        .and_then(|()| {
+            // On disk before the rename, so that a crash cannot leave a renamed, empty file.
+            std::fs::File::open(&tmp)
+                .and_then(|f| f.sync_all())
+                .and_then(|()| std::fs::rename(&tmp, path))
+                .map_err(|e| VaeError::io(path, e))
+        });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

@@ -62,6 +62,9 @@ impl Default for TrainConfig {
 
 impl TrainConfig {
     pub fn validate(&self) -> Result<()> {
+        if self.epochs == 0 {
+            return Err(VaeError::argument("epochs", "must be at least 1"));
+        }
         if self.batch == 0 {
             return Err(VaeError::argument("batch", "must be at least 1"));
         }

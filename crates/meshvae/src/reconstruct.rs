@@ -52,9 +52,19 @@ impl TrainedModel {
         Ok(())
     }
 
+    /// The feature extractor of this model (its rest mesh and feature options).
+    pub fn extractor(&self) -> Result<FeatureExtractor> {
+        Ok(FeatureExtractor::new(self.rest()?, self.spec.features)?)
+    }
+
     /// Normalised features of the meshes `ids` of `set` as `[B, V, 9]`.
-    pub fn encode_input(&self, set: &MeshSet, ids: &[usize], device: &Device) -> Result<Tensor> {
-        let extractor = FeatureExtractor::new(self.rest()?, self.spec.features)?;
+    pub fn encode_input(
+        &self,
+        extractor: &FeatureExtractor,
+        set: &MeshSet,
+        ids: &[usize],
+        device: &Device,
+    ) -> Result<Tensor> {
         let subset = set.subset(ids)?;
         let raw = extractor.extract(&subset)?.features;
         let normalized = self.normalization.apply(&raw);
@@ -84,9 +94,10 @@ impl TrainedModel {
     ) -> Result<Vec<Vec<[f64; 3]>>> {
         self.check_set(set)?;
         let reconstructor = Reconstructor::new(&self.rest()?)?;
+        let extractor = self.extractor()?;
         let mut out = Vec::with_capacity(ids.len());
         for chunk in ids.chunks(CHUNK) {
-            let x = self.encode_input(set, chunk, device)?;
+            let x = self.encode_input(&extractor, set, chunk, device)?;
             let y = self.model.reconstruct(&x)?;
             out.extend(self.positions_from_output(&reconstructor, &y)?);
         }

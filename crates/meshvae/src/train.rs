@@ -24,7 +24,7 @@ use candle_core::Device;
 use deform_features::FeatureOptions;
 use indicatif::{ProgressBar, ProgressStyle};
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
-use mesh_io::MeshSet;
+use mesh_io::{MeshSet, TriMesh};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -129,14 +129,22 @@ pub fn train(
     let device = &options.device;
     let hierarchy_config = hierarchy_config(&request.model, request.hierarchy);
 
-    let (spec, hierarchy, data) = if options.resume {
-        resume_setup(request, &folder, hierarchy_config)?
+    // Checked before anything is written, so bad settings leave no half-made model folder.
+    request.model.validate()?;
+    let (spec, hierarchy, data, template) = if options.resume {
+        let (spec, hierarchy, data) = resume_setup(request, &folder, hierarchy_config)?;
+        (spec, hierarchy, data, None)
     } else {
-        fresh_setup(request, &folder, options.force, hierarchy_config)?
+        let (spec, hierarchy, data, template) =
+            fresh_setup(request, &folder, options.force, hierarchy_config)?;
+        (spec, hierarchy, data, Some(template))
     };
 
     let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
     let mut adam = Adam::new(model.trainable_vars(), spec.train.lr)?;
+    if let Some(template) = &template {
+        write_model_files(&folder, &spec, &hierarchy, &data, template)?;
+    }
     let mut progress = Progress {
         epoch: 0,
         rng: Rng::new(stream_seed(spec.train.seed)).state(),
@@ -272,7 +280,7 @@ fn fresh_setup(
     folder: &ModelFolder,
     force: bool,
     hierarchy_config: HierarchyConfig,
-) -> Result<(ModelSpec, Hierarchy, MeshData)> {
+) -> Result<(ModelSpec, Hierarchy, MeshData, TriMesh)> {
     prepare_out_dir(folder, force)?;
     let set = request.set;
     let split = match &request.split {
@@ -297,13 +305,23 @@ fn fresh_setup(
         names: set.names().to_vec(),
         source: request.source.clone(),
     };
-    // The config goes last: a folder without it is not (yet) a model.
+    Ok((spec, hierarchy, data, template))
+}
+
+/// The files of a new model folder; the config goes last: a folder without it is not (yet) a
+/// model.
+fn write_model_files(
+    folder: &ModelFolder,
+    spec: &ModelSpec,
+    hierarchy: &Hierarchy,
+    data: &MeshData,
+    template: &TriMesh,
+) -> Result<()> {
     hierarchy.save(&folder.hierarchy())?;
     folder.write_json(&folder.normalization(), &data.normalization)?;
-    folder.write_json(&folder.split(), &SplitFile::new(&data.split, set.names()))?;
-    mesh_io::write_mesh(&folder.template(), &template)?;
-    folder.write_json(&folder.config(), &spec)?;
-    Ok((spec, hierarchy, data))
+    folder.write_json(&folder.split(), &SplitFile::new(&data.split, &spec.names))?;
+    mesh_io::write_mesh(&folder.template(), template)?;
+    folder.write_json(&folder.config(), spec)
 }
 
 fn resume_setup(

@@ -168,6 +168,17 @@ fn not_a_model_folder_and_bad_settings_are_typed_errors() {
     bad.train.lr = f64::NAN;
     let err = train(&bad, &options(false, false), |_| {}).unwrap_err();
     assert!(err.to_string().contains("lr"), "{err}");
+    let err = train(&request(&set, &out, 0), &options(false, false), |_| {}).unwrap_err();
+    assert!(err.to_string().contains("epochs"), "{err}");
+    // A bad model setting is refused before anything is written.
+    let mut bad = request(&set, &out, 1);
+    bad.model.latent = 0;
+    let err = train(&bad, &options(false, false), |_| {}).unwrap_err();
+    assert!(err.to_string().contains("latent"), "{err}");
+    assert!(
+        !ModelFolder::new(&out).has_model(),
+        "a refused run left a config.json"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 
