@@ -3,6 +3,13 @@
 //! target, plus each result's edge-length CV, printed before the timings.
 //!
 //! `cargo bench -p meshvae-benches --bench simplify` (skips, saying so, without the data set).
+//! qem-simplify's set-up (edge table, initial costs) runs on rayon's threads, its contraction
+//! loop on one; meshopt is single-threaded. `RAYON_NUM_THREADS=1` gives the one-thread figure.
+
+// glibc returns each large buffer to the kernel when it is freed, so every call pays ~3,000
+// page faults for fresh memory; the benches use mimalloc, as the `meshvae` binary does.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use mesh_io::TriMesh;
@@ -25,6 +32,17 @@ fn meshopt_simplify(mesh: &TriMesh, target_vertices: usize, options: SimplifyOpt
     let target_faces = mesh.face_count().saturating_sub(2 * removed);
     // Error bound 1 (the whole extent): only the count stops it.
     meshopt::simplify(&indices, &adapter, 3 * target_faces, 1.0, options, None)
+}
+
+/// The thread count rayon's global pool will use (its documented environment variable, else
+/// the available parallelism); printed only.
+fn rayon_threads() -> usize {
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .filter(|&n| n > 0)
+        .or_else(|| std::thread::available_parallelism().ok().map(|n| n.get()))
+        .unwrap_or(1)
 }
 
 fn faces_of(indices: &[u32]) -> Vec<[u32; 3]> {
@@ -59,9 +77,10 @@ fn bench_simplify(c: &mut Criterion) {
     };
 
     println!(
-        "elephant-gallop template: {} vertices, {} faces -> {target} vertices",
+        "elephant-gallop template: {} vertices, {} faces -> {target} vertices; {} rayon threads",
         fine.vertex_count(),
-        fine.face_count()
+        fine.face_count(),
+        rayon_threads()
     );
     println!(
         "input edge_cv {:.4}",

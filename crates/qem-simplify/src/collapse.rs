@@ -2,47 +2,34 @@
 //! whether it is allowed (topology from [`Connectivity`], geometry here).
 
 use crate::connectivity::Connectivity;
-use crate::geometry::{Vec3, add, area_vector, distance, dot, norm, scale, triangle_quality};
+use crate::geometry::{Vec3, add, area_vector, distance, dot, norm, quality_with_normal, scale};
+use crate::prefetch::{prefetch, prefetch_all};
 use crate::quadric::Quadric;
+use rayon::prelude::*;
 
 /// A new face whose shape quality (1 = equilateral, see `triangle_quality`) falls below this, and
 /// below its quality before the move, makes the contraction invalid: it guards against
 /// degenerate slivers, which the flip test alone lets through.
 pub(crate) const MIN_QUALITY: f64 = 0.01;
 
+/// How many edges ahead [`State::cost_all`] asks for the records it will read.
+const LOOKAHEAD: usize = 8;
+
 /// Weight of the plane through a boundary edge, perpendicular to its face, relative to the unit
 /// weight of a face plane: it keeps boundary vertices on the boundary's course.
 pub(crate) const BOUNDARY_WEIGHT: f64 = 100.0;
 
-/// Everything kept per edge, in one record so that touching an edge costs one cache miss: v̄
-/// and the quadric error (which depend on the edge's ends alone), the length term's longest new
-/// edge as last computed and the neighbour at that distance (`u32::MAX` for none), and the
-/// contraction loop's bookkeeping. Contractions nearby that neither remove nor move `farthest`
-/// can only lengthen the longest edge, so `longest` stays a lower bound until
-/// [`State::settle`] recomputes it.
+/// What is kept per edge for its cost, in one record so that touching an edge costs one cache
+/// miss: v̄ and the quadric error (which depend on the edge's ends alone), and the length term's
+/// longest new edge as last computed. The neighbour at that distance is kept apart (in
+/// [`State`]'s `farthest`), as the contraction loop scans it for many edges whose cost it does
+/// not read. Contractions nearby that neither remove nor move that neighbour can only lengthen
+/// the longest edge, so `longest` stays a lower bound until [`State::settle`] recomputes it.
 #[derive(Debug, Clone, Copy)]
 struct Placed {
     position: Vec3,
     quadric_error: f64,
     longest: f64,
-    farthest: u32,
-    /// The contraction number at which the loop last re-costed the edge.
-    visited: u32,
-    /// Whether the edge is in the loop's queue.
-    queued: bool,
-}
-
-impl Default for Placed {
-    fn default() -> Self {
-        Self {
-            position: [0.0; 3],
-            quadric_error: 0.0,
-            longest: 0.0,
-            farthest: u32::MAX,
-            visited: 0,
-            queued: true,
-        }
-    }
 }
 
 /// The mesh under simplification, in normalised coordinates (bounding-box centre at the origin,
@@ -57,6 +44,8 @@ pub(crate) struct State {
     lambda: f64,
     /// Per edge id.
     placed: Vec<Placed>,
+    /// Per edge id: the neighbour at the distance `Placed::longest` (`u32::MAX` for none).
+    farthest: Vec<u32>,
 }
 
 impl State {
@@ -108,9 +97,10 @@ impl State {
                 quadrics[b as usize] += q;
             }
         }
-        let edge_count = mesh.edge_id_count();
         Self {
-            placed: vec![Placed::default(); edge_count],
+            // Filled by `place_all`.
+            placed: Vec::new(),
+            farthest: Vec::new(),
             positions,
             quadrics,
             mesh,
@@ -152,9 +142,9 @@ impl State {
         best.1
     }
 
-    /// Re-places edge `e` (after one of its ends moved or merged) and returns its cost.
-    pub(crate) fn recost(&mut self, e: u32) -> f64 {
-        let [a, b] = self.mesh.edge(e);
+    /// v̄, the quadric error and the length term (with its farthest neighbour, `u32::MAX` for
+    /// none) of contracting (a, b), a < b, from scratch.
+    fn evaluate(&self, a: u32, b: u32) -> (Placed, u32) {
         let q = self.quadrics[a as usize] + self.quadrics[b as usize];
         let p = self.place(&q, a, b);
         // The quadric is positive semi-definite; rounding can make it a hair negative.
@@ -164,24 +154,58 @@ impl State {
         } else {
             (0.0, u32::MAX)
         };
-        let slot = &mut self.placed[e as usize];
-        slot.position = p;
-        slot.quadric_error = quadric_error;
-        slot.longest = longest;
-        slot.farthest = farthest;
+        let placed = Placed {
+            position: p,
+            quadric_error,
+            longest,
+        };
+        (placed, farthest)
+    }
+
+    /// Places every edge; in parallel, with the same result on any number of threads (each
+    /// edge's figures depend on the mesh alone).
+    pub(crate) fn place_all(&mut self) {
+        let (mut placed, mut farthest) = (Vec::new(), Vec::new());
+        let this = &*self;
+        let edges = self.mesh.edges();
+        (0..edges.len())
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|e| {
+                // The upper end's records, a few edges ahead (the lower end's are read in order).
+                if let Some(&[_, b]) = edges.get(e + LOOKAHEAD) {
+                    prefetch_all(&this.quadrics[b as usize]);
+                    this.mesh.prefetch_edges_around(b);
+                }
+                let [a, b] = edges[e];
+                this.evaluate(a, b)
+            })
+            .unzip_into_vecs(&mut placed, &mut farthest);
+        self.placed = placed;
+        self.farthest = farthest;
+    }
+
+    /// Re-places edge `e` (after one of its ends moved or merged) and returns its cost.
+    #[cfg(test)]
+    pub(crate) fn recost(&mut self, e: u32) -> f64 {
+        let [a, b] = self.mesh.edge(e);
+        let (placed, farthest) = self.evaluate(a, b);
+        self.placed[e as usize] = placed;
+        self.farthest[e as usize] = farthest;
         self.cost_of(e)
     }
 
-    /// Re-places edge `e`, one of whose ends is `keep`, after the contraction of (`keep`,
-    /// `removed`), and returns its cost with a lower bound of the length term: the distance
-    /// from the new v̄ to the old farthest neighbour, which is still a neighbour unless it was
-    /// `keep` or `removed` (then the term is measured in full). Settled at the top.
-    pub(crate) fn replace(&mut self, e: u32, keep: u32, removed: u32) -> f64 {
-        let [a, b] = self.mesh.edge(e);
+    /// Re-places edge `e` = (`keep`, `other`) after the contraction of (`keep`, `removed`), and
+    /// returns its cost with a lower bound of the length term: the distance from the new v̄ to
+    /// the old farthest neighbour, which is still a neighbour unless it was `keep` or `removed`
+    /// (then the term is measured in full). Settled at the top.
+    pub(crate) fn replace(&mut self, e: u32, keep: u32, other: u32, removed: u32) -> f64 {
+        let [a, b] = [keep.min(other), keep.max(other)];
+        debug_assert_eq!(self.mesh.edge(e), [a, b]);
         let q = self.quadrics[a as usize] + self.quadrics[b as usize];
         let p = self.place(&q, a, b);
         let quadric_error = q.error(p).max(0.0);
-        let farthest = self.placed[e as usize].farthest;
+        let farthest = self.farthest[e as usize];
         let (longest, farthest) = if self.lambda == 0.0 {
             (0.0, u32::MAX)
         } else if farthest == keep || farthest == removed || farthest == u32::MAX {
@@ -189,11 +213,12 @@ impl State {
         } else {
             (distance(p, self.positions[farthest as usize]), farthest)
         };
-        let slot = &mut self.placed[e as usize];
-        slot.position = p;
-        slot.quadric_error = quadric_error;
-        slot.longest = longest;
-        slot.farthest = farthest;
+        self.placed[e as usize] = Placed {
+            position: p,
+            quadric_error,
+            longest,
+        };
+        self.farthest[e as usize] = farthest;
         self.cost_of(e)
     }
 
@@ -201,37 +226,18 @@ impl State {
     /// changed) may have shortened its length term: only if it moved or removed the farthest
     /// neighbour. Otherwise the term can only have grown, and the cached one stays a lower bound.
     pub(crate) fn length_may_drop(&self, e: u32, keep: u32, removed: u32) -> bool {
-        let farthest = self.placed[e as usize].farthest;
+        let farthest = self.farthest[e as usize];
         self.lambda > 0.0 && (farthest == keep || farthest == removed)
     }
 
-    /// Marks edge `e` visited by contraction number `step`; false if it already was.
-    pub(crate) fn visit(&mut self, e: u32, step: u32) -> bool {
-        let slot = &mut self.placed[e as usize];
-        let first = slot.visited != step;
-        slot.visited = step;
-        first
-    }
-
-    /// Whether edge `e` is in the contraction loop's queue, as last recorded.
-    pub(crate) fn queued(&self, e: u32) -> bool {
-        self.placed[e as usize].queued
-    }
-
-    /// Records whether edge `e` is in the contraction loop's queue.
-    pub(crate) fn set_queued(&mut self, e: u32, queued: bool) {
-        self.placed[e as usize].queued = queued;
-    }
-
     /// Recomputes the length term of edge `e` for its current neighbourhood and returns its
-    /// exact cost (v̄ and the quadric error are exact since the last [`State::recost`]).
+    /// exact cost (v̄ and the quadric error are exact since the edge was last placed).
     pub(crate) fn settle(&mut self, e: u32) -> f64 {
         if self.lambda > 0.0 {
             let [a, b] = self.mesh.edge(e);
             let (longest, farthest) = self.longest_new_edge(a, b, self.placed[e as usize].position);
-            let slot = &mut self.placed[e as usize];
-            slot.longest = longest;
-            slot.farthest = farthest;
+            self.placed[e as usize].longest = longest;
+            self.farthest[e as usize] = farthest;
         }
         self.cost_of(e)
     }
@@ -244,21 +250,20 @@ impl State {
             self.placed[e as usize].position,
             self.positions[keep as usize],
         );
-        let slot = &mut self.placed[e as usize];
-        slot.longest = d;
-        slot.farthest = keep;
+        self.placed[e as usize].longest = d;
+        self.farthest[e as usize] = keep;
         self.cost_of(e)
     }
 
     /// Eq. 1 of the paper: v̄ᵀ(Q_a + Q_b)v̄ + λ · (longest new edge from v̄ to the other
     /// neighbours of a and b), lengths in units of the bounding-box diagonal, as cached for `e`
-    /// (exact after [`State::recost`] or [`State::settle`], else a lower bound).
+    /// (exact after placing the edge or [`State::settle`], else a lower bound).
     pub(crate) fn cost_of(&self, e: u32) -> f64 {
         let slot = &self.placed[e as usize];
         slot.quadric_error + self.lambda * slot.longest
     }
 
-    /// The v̄ of edge `e` as of its last [`State::recost`].
+    /// The v̄ of edge `e` as last placed.
     pub(crate) fn placed(&self, e: u32) -> Vec3 {
         self.placed[e as usize].position
     }
@@ -290,8 +295,22 @@ impl State {
     /// face that survives with a moved corner, no inversion against its current normal or
     /// against the fine face it descends from, and no new sliver.
     pub(crate) fn is_valid(&mut self, a: u32, b: u32, p: Vec3) -> bool {
+        for v in [a, b] {
+            prefetch_all(&self.quadrics[v as usize]);
+            for &f in self.mesh.faces_around(v) {
+                self.mesh.prefetch_face(f);
+                prefetch_all(&self.original_normals[f as usize]);
+            }
+        }
         if !self.mesh.link_condition(a, b) {
             return false;
+        }
+        for v in [a, b] {
+            for &f in self.mesh.faces_around(v) {
+                for w in self.mesh.face(f) {
+                    prefetch_all(&self.positions[w as usize]);
+                }
+            }
         }
         for (moved, other) in [(a, b), (b, a)] {
             for &f in self.mesh.faces_around(moved) {
@@ -318,17 +337,65 @@ impl State {
     fn face_stays_valid(&self, f: u32, old: [Vec3; 3], new: [Vec3; 3]) -> bool {
         let n_old = area_vector(old[0], old[1], old[2]);
         let n_new = area_vector(new[0], new[1], new[2]);
-        if dot(n_new, n_old) <= 0.0 && norm(n_old) > 0.0 {
+        // `dot(n, n) > 0` is `norm(n) > 0` without the square root.
+        if dot(n_new, n_old) <= 0.0 && dot(n_old, n_old) > 0.0 {
             return false;
         }
-        if dot(n_new, self.original_normals[f as usize]) <= 0.0
-            && norm(self.original_normals[f as usize]) > 0.0
-        {
+        let original = self.original_normals[f as usize];
+        if dot(n_new, original) <= 0.0 && dot(original, original) > 0.0 {
             return false;
         }
-        let q_new = triangle_quality(new[0], new[1], new[2]);
+        let q_new = quality_with_normal(new[0], new[1], new[2], n_new);
         // The old quality matters only for a new sliver (it may have been one already).
-        q_new >= MIN_QUALITY || (q_new > 0.0 && q_new >= triangle_quality(old[0], old[1], old[2]))
+        q_new >= MIN_QUALITY
+            || (q_new > 0.0 && q_new >= quality_with_normal(old[0], old[1], old[2], n_old))
+    }
+
+    /// Asks for the records that re-placing edge `e` = (·, `other`) reads.
+    pub(crate) fn prefetch_edge(&self, e: u32, other: u32) {
+        prefetch_all(&self.quadrics[other as usize]);
+        prefetch(&self.positions[other as usize]);
+        prefetch_all(&self.placed[e as usize]);
+        prefetch(&self.farthest[e as usize]);
+        self.mesh.prefetch_vertex(other);
+    }
+
+    /// Asks for what settling edge `e` reads first.
+    pub(crate) fn prefetch_top(&self, e: u32) {
+        self.mesh.prefetch_edge(e);
+        prefetch_all(&self.placed[e as usize]);
+    }
+
+    /// Asks for the positions of `v`'s neighbours.
+    pub(crate) fn prefetch_neighbours(&self, v: u32) {
+        for s in self.mesh.edges_around(v) {
+            prefetch_all(&self.positions[s.to as usize]);
+        }
+    }
+
+    /// Asks for the faces around the ends of edge `e` (where they are listed, and the
+    /// quadrics), which checking its contraction reads next.
+    pub(crate) fn prefetch_incident(&self, e: u32) {
+        for v in self.mesh.edge(e) {
+            self.mesh.prefetch_faces_around(v);
+        }
+    }
+
+    /// Asks for edge `e`'s v̄ and cost.
+    pub(crate) fn prefetch_placed(&self, e: u32) {
+        prefetch_all(&self.placed[e as usize]);
+    }
+
+    /// Asks for where the edges around edge `e`'s ends are listed.
+    pub(crate) fn prefetch_ends(&self, e: u32) {
+        for v in self.mesh.edge(e) {
+            self.mesh.prefetch_vertex(v);
+        }
+    }
+
+    /// Asks for the record that the loop's scan of edge `e` reads.
+    pub(crate) fn prefetch_farthest(&self, e: u32) {
+        prefetch(&self.farthest[e as usize]);
     }
 
     /// Performs the contraction: `keep` moves to `p` and takes `remove`'s quadric, faces and
@@ -349,7 +416,9 @@ mod tests {
         let topology = crate::manifold::topology(positions.len(), &mesh.faces).expect("manifold");
         let boundary = topology.boundary.clone();
         let connectivity = Connectivity::from_topology(&mesh.faces, topology);
-        State::new(positions, &mesh.faces, &boundary, connectivity, lambda)
+        let mut s = State::new(positions, &mesh.faces, &boundary, connectivity, lambda);
+        s.place_all();
+        s
     }
 
     /// The quadric of vertex v from scratch as a dense 4×4 matrix: Σ p pᵀ over its faces' planes.

@@ -51,31 +51,20 @@ impl Connectivity {
         let Topology {
             incident, edges, ..
         } = topology;
-        // Each vertex's spokes in edge id order, gathered in one list first.
+        // Each vertex's spokes in edge id order.
         let n = incident.len();
-        let mut offsets = vec![0u32; n + 1];
+        let mut lengths = vec![0u32; n];
         for &[a, b] in &edges {
-            offsets[a as usize + 1] += 1;
-            offsets[b as usize + 1] += 1;
+            lengths[a as usize] += 1;
+            lengths[b as usize] += 1;
         }
-        for v in 0..n {
-            offsets[v + 1] += offsets[v];
-        }
-        let mut cursor = offsets.clone();
-        let mut spokes = vec![Spoke { edge: 0, to: 0 }; offsets[n] as usize];
+        let mut vertex_edges =
+            Lists::with_room(&lengths, crate::manifold::SLACK, Spoke { edge: 0, to: 0 });
         for (e, &[a, b]) in edges.iter().enumerate() {
             let edge = e as u32;
-            spokes[cursor[a as usize] as usize] = Spoke { edge, to: b };
-            cursor[a as usize] += 1;
-            spokes[cursor[b as usize] as usize] = Spoke { edge, to: a };
-            cursor[b as usize] += 1;
+            vertex_edges.push(a, Spoke { edge, to: b });
+            vertex_edges.push(b, Spoke { edge, to: a });
         }
-        let vertex_edges = Lists::from_lists(
-            offsets
-                .windows(2)
-                .map(|w| &spokes[w[0] as usize..w[1] as usize]),
-            crate::manifold::SLACK,
-        );
         Self {
             faces: faces.to_vec(),
             face_alive: vec![true; faces.len()],
@@ -94,6 +83,11 @@ impl Connectivity {
         self.edges.len()
     }
 
+    /// Every edge id's endpoints, lower first.
+    pub(crate) fn edges(&self) -> &[[u32; 2]] {
+        &self.edges
+    }
+
     /// The endpoints of edge `e`, lower first.
     pub(crate) fn edge(&self, e: u32) -> [u32; 2] {
         self.edges[e as usize]
@@ -102,6 +96,31 @@ impl Connectivity {
     /// The live edges at `v`.
     pub(crate) fn edges_around(&self, v: u32) -> &[Spoke] {
         self.vertex_edges.get(v)
+    }
+
+    /// Asks for where `v`'s list of edges is kept.
+    pub(crate) fn prefetch_vertex(&self, v: u32) {
+        self.vertex_edges.prefetch_span(v);
+    }
+
+    /// Asks for `v`'s list of faces.
+    pub(crate) fn prefetch_faces_around(&self, v: u32) {
+        self.incident.prefetch_items(v);
+    }
+
+    /// Asks for `v`'s list of edges (its place known, see [`Connectivity::prefetch_vertex`]).
+    pub(crate) fn prefetch_edges_around(&self, v: u32) {
+        self.vertex_edges.prefetch_items(v);
+    }
+
+    /// Asks for face `f`'s corners.
+    pub(crate) fn prefetch_face(&self, f: u32) {
+        crate::prefetch::prefetch(&self.faces[f as usize]);
+    }
+
+    /// Asks for edge `e`'s ends.
+    pub(crate) fn prefetch_edge(&self, e: u32) {
+        crate::prefetch::prefetch(&self.edges[e as usize]);
     }
 
     pub(crate) fn face(&self, f: u32) -> Face {
@@ -216,6 +235,9 @@ impl Connectivity {
     pub(crate) fn collapse(&mut self, keep: u32, remove: u32, dead_edges: &mut Vec<u32>) {
         let mut moved = std::mem::take(&mut self.scratch_spokes);
         self.vertex_edges.take_into(remove, &mut moved);
+        for s in &moved {
+            self.vertex_edges.prefetch_items(s.to);
+        }
         self.vertex_edges.retain(keep, |s| s.to != remove);
         // `keep`'s own edges, before it takes any of `remove`'s.
         let kept = self.vertex_edges.get(keep).len();

@@ -42,13 +42,19 @@ pub(crate) fn area_vector(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
 
 /// Shape quality 4√3·area / (sum of squared edge lengths): 1 for an equilateral triangle, 0 for a
 /// degenerate one. Scale-invariant, so one threshold fits every mesh.
+#[cfg(test)]
 pub(crate) fn triangle_quality(a: Vec3, b: Vec3, c: Vec3) -> f64 {
+    quality_with_normal(a, b, c, area_vector(a, b, c))
+}
+
+/// [`triangle_quality`] given `n` = `area_vector(a, b, c)`.
+pub(crate) fn quality_with_normal(a: Vec3, b: Vec3, c: Vec3, n: Vec3) -> f64 {
     let squares = dot(sub(b, a), sub(b, a)) + dot(sub(c, b), sub(c, b)) + dot(sub(a, c), sub(a, c));
     if squares <= 0.0 {
         return 0.0;
     }
     // 4√3 · (|n| / 2) = 2√3 · |n|.
-    2.0 * 3f64.sqrt() * norm(area_vector(a, b, c)) / squares
+    2.0 * 3f64.sqrt() * norm(n) / squares
 }
 
 pub(crate) fn to_f64(p: [f32; 3]) -> Vec3 {

@@ -26,7 +26,9 @@
 //!   characteristic), flips no face against its current normal nor against the fine face it
 //!   descends from, and makes no face a sliver (shape quality below 0.01, unless it was already
 //!   worse). An invalid candidate waits until a contraction nearby re-costs it.
-//! - **Order.** Ties are broken by edge id, so the same input gives the same output on any run.
+//! - **Order.** Ties are broken by edge id, so the same input gives the same output on any run
+//!   and on any number of threads (the set-up — edge table, initial costs — runs on rayon's
+//!   pool; the contraction loop is sequential).
 //! - **Target.** Exactly the requested vertex count (default: half, rounded up, as the paper
 //!   contracts half per level), or [`SimplifyError::TargetUnreachable`].
 //! - **Result.** Coarse vertex k is the k-th surviving fine vertex in ascending index (the
@@ -53,6 +55,7 @@ mod grid;
 mod heap;
 mod lists;
 pub mod manifold;
+mod prefetch;
 pub mod quadric;
 mod report;
 pub mod shapes;

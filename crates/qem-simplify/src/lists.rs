@@ -20,6 +20,7 @@ pub(crate) struct Lists<T> {
 
 impl<T: Copy> Lists<T> {
     /// `lists.len()` lists holding `lists[i]`, each with room for `slack` more items.
+    #[cfg(test)]
     pub(crate) fn from_lists<'a>(
         lists: impl ExactSizeIterator<Item = &'a [T]>,
         slack: usize,
@@ -45,6 +46,28 @@ impl<T: Copy> Lists<T> {
         Self { spans, items }
     }
 
+    /// Empty lists with room for `lengths[i]` + `slack` items each (the room filled with
+    /// `fill`, never read), to be filled by [`Lists::push`] without moving.
+    pub(crate) fn with_room(lengths: &[u32], slack: usize, fill: T) -> Self {
+        let mut start = 0u32;
+        let spans = lengths
+            .iter()
+            .map(|&len| {
+                let span = Span {
+                    start,
+                    len: 0,
+                    cap: len + slack as u32,
+                };
+                start += span.cap;
+                span
+            })
+            .collect();
+        Self {
+            spans,
+            items: vec![fill; start as usize],
+        }
+    }
+
     /// The number of lists.
     pub(crate) fn len(&self) -> usize {
         self.spans.len()
@@ -54,6 +77,19 @@ impl<T: Copy> Lists<T> {
     pub(crate) fn get(&self, v: u32) -> &[T] {
         let s = self.spans[v as usize];
         &self.items[s.start as usize..(s.start + s.len) as usize]
+    }
+
+    /// Asks for where list `v` is kept.
+    pub(crate) fn prefetch_span(&self, v: u32) {
+        crate::prefetch::prefetch(&self.spans[v as usize]);
+    }
+
+    /// Asks for list `v`'s first items.
+    pub(crate) fn prefetch_items(&self, v: u32) {
+        let s = self.spans[v as usize];
+        if let Some(first) = self.items.get(s.start as usize) {
+            crate::prefetch::prefetch(first);
+        }
     }
 
     /// List `v`, mutable.
@@ -108,6 +144,19 @@ impl<T: Copy> Lists<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lists_made_with_room_fill_without_moving() {
+        let mut lists = Lists::with_room(&[2, 0, 3], 1, 0u32);
+        let before = lists.items.len();
+        for (v, x) in [(0, 5), (2, 7), (0, 6), (2, 8), (2, 9), (1, 4)] {
+            lists.push(v, x);
+        }
+        assert_eq!(lists.items.len(), before, "no list moved");
+        assert_eq!(lists.get(0), &[5, 6]);
+        assert_eq!(lists.get(1), &[4]);
+        assert_eq!(lists.get(2), &[7, 8, 9]);
+    }
 
     #[test]
     fn behaves_like_a_vec_per_list() {

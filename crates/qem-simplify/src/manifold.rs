@@ -3,6 +3,7 @@
 
 use crate::lists::Lists;
 use mesh_io::Face;
+use rayon::prelude::*;
 
 /// The first reason a face list is not a 2-manifold.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -55,7 +56,9 @@ pub(crate) struct Topology {
 
 /// The [`Topology`] of `faces` (indices below `vertex_count`, checked by the caller), or the
 /// first [`ManifoldDefect`]: a repeated vertex (lowest face), else an overused edge (lowest
-/// edge), else a pinched vertex (lowest vertex). One pass over each vertex's faces, O(F).
+/// edge), else a pinched vertex (lowest vertex). One pass over each vertex's faces, O(F), in
+/// parallel over ranges of vertices joined in order, so the result does not depend on the
+/// number of threads.
 pub(crate) fn topology(
     vertex_count: usize,
     faces: &[Face],
@@ -66,10 +69,65 @@ pub(crate) fn topology(
     {
         return Err(ManifoldDefect::RepeatedVertex { face });
     }
-    let (offsets, around_all) = vertex_faces(vertex_count, faces);
-    let mut edges = Vec::with_capacity(faces.len() * 3 / 2 + 2);
+    let incident = vertex_faces(vertex_count, faces);
+    // A few ranges per thread (each needs a scratch array as long as the vertex list).
+    let ranges = (rayon::current_num_threads() * 2).clamp(1, vertex_count.div_ceil(4096).max(1));
+    let size = vertex_count.div_ceil(ranges).max(1);
+    let parts: Vec<Part> = (0..ranges)
+        .into_par_iter()
+        .map(|r| {
+            let range = (r * size).min(vertex_count)..((r + 1) * size).min(vertex_count);
+            scan(range, vertex_count, faces, &incident)
+        })
+        .collect();
+    let mut edges = Vec::with_capacity(parts.iter().map(|p| p.edges.len()).sum());
     let mut boundary = Vec::new();
     let mut pinched = None;
+    for part in parts {
+        // The lowest overused edge wins over any pinched vertex.
+        if let Some(defect) = part.overused {
+            return Err(defect);
+        }
+        pinched = pinched.or(part.pinched);
+        let first = edges.len() as u32;
+        boundary.extend(part.boundary.iter().map(|&e| first + e));
+        edges.extend_from_slice(&part.edges);
+    }
+    match pinched {
+        Some(defect) => Err(defect),
+        None => Ok(Topology {
+            incident,
+            edges,
+            boundary,
+        }),
+    }
+}
+
+/// What [`scan`] finds for a range of vertices.
+struct Part {
+    /// The edges whose lower end is in the range, in order.
+    edges: Vec<[u32; 2]>,
+    /// Indices into `edges` of the boundary edges.
+    boundary: Vec<u32>,
+    /// The first overused edge, if any (the scan stops there).
+    overused: Option<ManifoldDefect>,
+    /// The first pinched vertex, if any.
+    pinched: Option<ManifoldDefect>,
+}
+
+/// The edges, boundary edges and defects of the vertices in `range`.
+fn scan(
+    range: std::ops::Range<usize>,
+    vertex_count: usize,
+    faces: &[Face],
+    incident: &Lists<u32>,
+) -> Part {
+    let mut part = Part {
+        edges: Vec::with_capacity(range.len() * 3 + 2),
+        boundary: Vec::new(),
+        overused: None,
+        pinched: None,
+    };
     // Per vertex v: its distinct neighbours w, each with a face holding edge (v, w) and how many
     // do (`slot[w]` finds w's entry while `slot[w].0 == v`), and a union-find over v's faces
     // joining those that share an edge at v.
@@ -77,8 +135,8 @@ pub(crate) fn topology(
     let mut local: Vec<(u32, u32, u32)> = Vec::new();
     let mut higher: Vec<(u32, u32)> = Vec::new();
     let mut parent = Vec::<u32>::new();
-    for (v, span) in offsets.windows(2).enumerate() {
-        let around = &around_all[span[0] as usize..span[1] as usize];
+    for v in range {
+        let around = incident.get(v as u32);
         let v32 = v as u32;
         local.clear();
         parent.clear();
@@ -114,35 +172,24 @@ pub(crate) fn topology(
         higher.sort_unstable();
         for &(w, count) in &higher {
             if count > 2 {
-                return Err(ManifoldDefect::EdgeOverused {
+                part.overused = Some(ManifoldDefect::EdgeOverused {
                     a: v32,
                     b: w,
                     faces: count as usize,
                 });
+                return part;
             }
             if count == 1 {
-                boundary.push(edges.len() as u32);
+                part.boundary.push(part.edges.len() as u32);
             }
-            edges.push([v32, w]);
+            part.edges.push([v32, w]);
         }
         // Faces sharing an edge at v are one fan; reported once no edge is overused.
-        if fans > 1 && pinched.is_none() {
-            pinched = Some(ManifoldDefect::VertexNotFan { vertex: v32, fans });
+        if fans > 1 && part.pinched.is_none() {
+            part.pinched = Some(ManifoldDefect::VertexNotFan { vertex: v32, fans });
         }
     }
-    match pinched {
-        Some(defect) => Err(defect),
-        None => Ok(Topology {
-            incident: Lists::from_lists(
-                offsets
-                    .windows(2)
-                    .map(|w| &around_all[w[0] as usize..w[1] as usize]),
-                SLACK,
-            ),
-            edges,
-            boundary,
-        }),
-    }
+    part
 }
 
 fn root(parent: &mut [u32], mut i: u32) -> u32 {
@@ -153,34 +200,26 @@ fn root(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
-/// The faces incident to each vertex, in ascending face order, as offsets (one per vertex,
-/// plus one) into one list. Indices at or past `vertex_count` are ignored.
-fn vertex_faces(vertex_count: usize, faces: &[Face]) -> (Vec<u32>, Vec<u32>) {
-    let mut offsets = vec![0u32; vertex_count + 1];
+/// The faces incident to each vertex, in ascending face order, with room for [`SLACK`] more.
+/// Indices at or past `vertex_count` are ignored.
+fn vertex_faces(vertex_count: usize, faces: &[Face]) -> Lists<u32> {
+    let mut lengths = vec![0u32; vertex_count];
     for f in faces {
         for &v in f {
-            if let Some(d) = offsets.get_mut(v as usize + 1) {
+            if let Some(d) = lengths.get_mut(v as usize) {
                 *d += 1;
             }
         }
     }
-    for v in 0..vertex_count {
-        offsets[v + 1] += offsets[v];
-    }
-    let mut cursor = offsets.clone();
-    let mut items = vec![0u32; offsets[vertex_count] as usize];
+    let mut lists = Lists::with_room(&lengths, SLACK, 0);
     for (i, f) in faces.iter().enumerate() {
         for &v in f {
-            if let Some(c) = cursor
-                .get_mut(v as usize)
-                .filter(|_| (v as usize) < vertex_count)
-            {
-                items[*c as usize] = i as u32;
-                *c += 1;
+            if (v as usize) < vertex_count {
+                lists.push(v, i as u32);
             }
         }
     }
-    (offsets, items)
+    lists
 }
 
 #[cfg(test)]
@@ -267,6 +306,41 @@ mod tests {
                 b: 6,
                 faces: 3
             })
+        );
+        // The same on a mesh large enough to be scanned in several ranges: the pinched vertex
+        // in the first range, the overused edge in the last.
+        let sphere = crate::shapes::icosphere(5);
+        let n = sphere.vertex_count() as u32;
+        assert!(n > 2 * 4096);
+        let mut faces = sphere.faces.clone();
+        faces.push([0, n, n + 1]);
+        let pinched_only = manifold_defect(n as usize + 2, &faces);
+        faces.extend([
+            [n + 2, n + 3, n + 4],
+            [n + 3, n + 2, n + 5],
+            [n + 2, n + 3, n + 6],
+        ]);
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("thread pool");
+            assert_eq!(
+                pool.install(|| manifold_defect(n as usize + 2, &faces[..faces.len() - 3])),
+                pinched_only
+            );
+            assert_eq!(
+                pool.install(|| manifold_defect(n as usize + 7, &faces)),
+                Some(ManifoldDefect::EdgeOverused {
+                    a: n + 2,
+                    b: n + 3,
+                    faces: 3
+                })
+            );
+        }
+        assert_eq!(
+            pinched_only,
+            Some(ManifoldDefect::VertexNotFan { vertex: 0, fans: 2 })
         );
         // Two fans touching at 0, each closed around it: still two fans.
         let double_cone = [

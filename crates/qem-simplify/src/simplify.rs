@@ -159,16 +159,15 @@ fn frame(points: &[Point]) -> (Vec3, f64) {
 fn contract_to(state: &mut State, target: usize) -> Result<Vec<u32>> {
     let n = state.positions.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    let edge_count = state.mesh.edge_id_count();
-    let costs: Vec<f64> = (0..edge_count as u32).map(|e| state.recost(e)).collect();
+    state.place_all();
     // Invariant: every queued edge's key is at most its true cost. Costs that may drop are
     // pushed at once; costs that can only grow (a length term whose farthest neighbour stayed
     // put) are left as they are and settled when they reach the top. So the edge at the top
     // with key = true cost is the cheapest of all: the greedy order is exact.
-    let mut queue = EdgeQueue::from_costs(costs);
+    let edge_count = state.mesh.edge_id_count() as u32;
+    let mut queue = EdgeQueue::from_costs((0..edge_count).map(|e| state.cost_of(e)));
     let mut remaining = n;
-    let (mut ring, mut dead) = (Vec::new(), Vec::new());
-    let mut step = 0u32;
+    let (mut ring, mut around, mut dead) = (Vec::new(), Vec::new(), Vec::new());
     while remaining > target {
         let Some((edge, key)) = queue.peek() else {
             return Err(SimplifyError::TargetUnreachable {
@@ -176,7 +175,12 @@ fn contract_to(state: &mut State, target: usize) -> Result<Vec<u32>> {
                 reached: remaining,
             });
         };
+        // The likely next tops (if this one is raised or taken): where their ends' edges are.
+        for next in queue.next_tops() {
+            state.prefetch_ends(next);
+        }
         let cost = state.settle(edge);
+        state.prefetch_incident(edge);
         debug_assert!(
             cost.total_cmp(&key).is_ge(),
             "a queued key above its true cost"
@@ -190,48 +194,81 @@ fn contract_to(state: &mut State, target: usize) -> Result<Vec<u32>> {
         let p = state.placed(edge);
         if !state.is_valid(keep, remove, p) {
             // Out of the queue until a contraction nearby re-costs it.
-            state.set_queued(edge, false);
             continue;
         }
         dead.clear();
         state.contract(keep, remove, p, &mut dead);
         for &e in &dead {
+            queue.prefetch(e);
+        }
+        for &e in &dead {
             queue.remove(e);
         }
         parent[remove as usize] = keep;
         remaining -= 1;
-        step += 1;
         // The edges at `keep` need a new v̄; the other edges of its neighbours may have a
         // shorter length term (then re-measured now) or a longer one (settled at the top).
         // Either may have become valid again: all go (back) into the queue.
         ring.clear();
+        prefetch_spokes(state, &queue, keep);
         for i in 0..state.mesh.edges_around(keep).len() {
             let spoke = state.mesh.edges_around(keep)[i];
-            state.visit(spoke.edge, step);
             ring.push(spoke.to);
-            let cost = state.replace(spoke.edge, keep, remove);
+            let cost = state.replace(spoke.edge, keep, spoke.to, remove);
             queue.set(spoke.edge, cost);
-            state.set_queued(spoke.edge, true);
         }
+        // The edges of the ring vertices, but those at `keep` (re-placed above).
+        around.clear();
         for &w in &ring {
-            for i in 0..state.mesh.edges_around(w).len() {
-                let e = state.mesh.edges_around(w)[i].edge;
-                if state.visit(e, step) {
-                    debug_assert_eq!(state.queued(e), queue.contains(e));
-                    if state.length_may_drop(e, keep, remove) {
-                        let cost = state.lower_length(e, keep);
-                        queue.set(e, cost);
-                    } else if !state.queued(e) {
-                        queue.set(e, state.cost_of(e));
-                    } else {
-                        continue;
-                    }
-                    state.set_queued(e, true);
+            for &spoke in state.mesh.edges_around(w) {
+                if spoke.to != keep {
+                    around.push(spoke.edge);
+                    state.prefetch_farthest(spoke.edge);
+                    queue.prefetch_slot(spoke.edge);
                 }
+            }
+        }
+        for &e in &around {
+            if state.length_may_drop(e, keep, remove) {
+                state.prefetch_placed(e);
+                queue.prefetch(e);
+            }
+        }
+        // An edge between two ring vertices is seen twice; the second visit finds it queued
+        // with `keep` as its farthest neighbour, and repeating the lowering changes nothing.
+        for &e in &around {
+            if state.length_may_drop(e, keep, remove) {
+                let cost = state.lower_length(e, keep);
+                queue.set(e, cost);
+            } else if !queue.contains(e) {
+                queue.set(e, state.cost_of(e));
+            }
+        }
+        if let Some((top, _)) = queue.peek() {
+            state.prefetch_top(top);
+            for next in queue.next_tops() {
+                state.prefetch_top(next);
             }
         }
     }
     Ok(parent)
+}
+
+/// Asks for what re-placing the edges at `keep` reads, in stages, each reading what the
+/// previous one asked for: records of the edges and their other ends, then those ends' edge
+/// lists and heap entries, then the positions of their neighbours (the length term's).
+fn prefetch_spokes(state: &State, queue: &EdgeQueue, keep: u32) {
+    for &spoke in state.mesh.edges_around(keep) {
+        state.prefetch_edge(spoke.edge, spoke.to);
+        queue.prefetch_slot(spoke.edge);
+    }
+    for &spoke in state.mesh.edges_around(keep) {
+        state.mesh.prefetch_edges_around(spoke.to);
+        queue.prefetch(spoke.edge);
+    }
+    for &spoke in state.mesh.edges_around(keep) {
+        state.prefetch_neighbours(spoke.to);
+    }
 }
 
 /// Builds the coarse mesh (survivors in ascending order, live faces in fine order) and the map.

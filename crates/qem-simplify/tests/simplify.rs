@@ -66,6 +66,24 @@ fn same_input_same_output() {
 }
 
 #[test]
+fn same_output_on_any_number_of_threads() {
+    // Large enough for several topology ranges and several batches of initial costs.
+    for mesh in [icosphere(5), bumpy_grid(100, 90)] {
+        for lambda in [0.0, 0.001] {
+            let run = |threads| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .expect("thread pool")
+                    .install(|| simplify(&mesh, &config(Target::Ratio(0.5), lambda)))
+                    .expect("simplifies")
+            };
+            assert_eq!(run(1), run(3), "lambda={lambda}");
+        }
+    }
+}
+
+#[test]
 fn target_equal_to_the_input_changes_nothing() {
     let mesh = icosphere(1);
     let s = simplify(&mesh, &config(Target::Ratio(1.0), 0.001)).unwrap();
