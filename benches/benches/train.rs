@@ -47,7 +47,7 @@ fn step(c: &mut Criterion) {
                     .expect("eps");
                 // As `meshvae::train` does: the L2 gradient is applied by Adam.
                 let loss = model.training_loss(&x, &eps, &weights).expect("loss");
-                let grads = loss.total.backward().expect("backward");
+                let grads = model.backward(&loss.total).expect("backward");
                 adam.step_with_l2(&grads, weights.l2).expect("adam");
             })
         });

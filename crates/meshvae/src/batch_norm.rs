@@ -62,6 +62,15 @@ impl BatchNorm {
 
     /// Normalises x `[B, V, C]`. In [`Mode::Train`] this also updates the running statistics.
     pub fn forward(&self, x: &Tensor, mode: Mode) -> Result<Tensor> {
+        self.forward_then(x, mode, false)
+    }
+
+    /// tanh of [`Self::forward`], fused on the CPU (the normalised values are never stored).
+    pub fn forward_tanh(&self, x: &Tensor, mode: Mode) -> Result<Tensor> {
+        self.forward_then(x, mode, true)
+    }
+
+    fn forward_then(&self, x: &Tensor, mode: Mode, tanh: bool) -> Result<Tensor> {
         let (batch, v, c) = x.dims3().map_err(|_| {
             VaeError::shape(
                 "BatchNorm::forward",
@@ -80,15 +89,16 @@ impl BatchNorm {
         }
         let flat = x.reshape((batch * v, c))?;
         let y = if crate::ops::fusable(&flat) {
-            self.fused(&flat, mode)?
+            self.fused(&flat, mode, tanh)?
         } else {
-            self.unfused(&flat, mode)?
+            let y = self.unfused(&flat, mode)?;
+            if tanh { y.tanh()? } else { y }
         };
         Ok(y.reshape((batch, v, c))?)
     }
 
     /// The fused CPU op (see `ops.rs`) on x `[N, C]`.
-    fn fused(&self, flat: &Tensor, mode: Mode) -> Result<Tensor> {
+    fn fused(&self, flat: &Tensor, mode: Mode, tanh: bool) -> Result<Tensor> {
         let (mean, var) = match mode {
             Mode::Train => {
                 let (mean, var) = crate::ops::channel_moments(flat)?;
@@ -124,9 +134,9 @@ impl BatchNorm {
             flat,
             self.gamma.as_tensor(),
             self.beta.as_tensor(),
-            mean,
-            inv_std,
+            (mean, inv_std),
             mode == Mode::Train,
+            tanh,
         )?)
     }
 
@@ -273,12 +283,21 @@ mod tests {
         // 7,000 × 3 rows: the fused op's reductions span several chunks.
         let x = Var::from_tensor(&data(20, 350, 3, 5)).unwrap();
         let r = data(20, 350, 3, 6);
-        for mode in [Mode::Train, Mode::Eval] {
+        for (mode, tanh) in [
+            (Mode::Train, false),
+            (Mode::Eval, false),
+            (Mode::Train, true),
+            (Mode::Eval, true),
+        ] {
             let flat = x.as_tensor().reshape((7000, 3)).unwrap();
-            let ya = a.fused(&flat, mode).unwrap();
+            let ya = a.fused(&flat, mode, tanh).unwrap();
             let yb = b.unfused(&flat, mode).unwrap();
+            let yb = if tanh { yb.tanh().unwrap() } else { yb };
             let diff = (&ya - &yb).unwrap().abs().unwrap().max_all().unwrap();
-            assert!(diff.to_scalar::<f64>().unwrap() < 1e-12, "{mode:?}");
+            assert!(
+                diff.to_scalar::<f64>().unwrap() < 1e-12,
+                "{mode:?} tanh {tanh}"
+            );
             let r = r.reshape((7000, 3)).unwrap();
             let ga = (ya * &r).unwrap().sum_all().unwrap().backward().unwrap();
             let gb = (yb * &r).unwrap().sum_all().unwrap().backward().unwrap();

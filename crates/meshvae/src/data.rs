@@ -11,9 +11,9 @@ use mesh_io::MeshSet;
 /// Features of a set, their normalisation, and the split they were fitted on.
 #[derive(Debug, Clone)]
 pub struct MeshData {
-    /// Raw features of every mesh (relative to the set's first mesh, the rest pose).
-    pub raw: FeatureSet,
-    /// The same, normalised with [`Self::normalization`].
+    /// Features of every mesh (relative to the set's first mesh, the rest pose), normalised
+    /// with [`Self::normalization`]. The raw features are not kept: on large meshes they would
+    /// double this, the largest thing in memory besides the model.
     pub normalized: FeatureSet,
     /// Fitted on the training meshes only, so the test meshes stay unseen.
     pub normalization: Normalization,
@@ -50,8 +50,8 @@ impl MeshData {
         warnings: Vec<String>,
     ) -> Self {
         let normalized = normalization.apply(&raw);
+        drop(raw);
         Self {
-            raw,
             normalized,
             normalization,
             split,
@@ -60,7 +60,7 @@ impl MeshData {
     }
 
     pub fn len(&self) -> usize {
-        self.raw.frames()
+        self.normalized.frames()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -68,7 +68,7 @@ impl MeshData {
     }
 
     pub fn vertex_count(&self) -> usize {
-        self.raw.vertices()
+        self.normalized.vertices()
     }
 
     /// Normalised features of the meshes `indices` as an f32 tensor `[B, V, 9]`.
@@ -119,6 +119,11 @@ mod tests {
         .unwrap()
         .set;
         let split = Split::random(set.len(), 0.5, 3).unwrap();
+        let raw = FeatureExtractor::for_set(&set, FeatureOptions::default())
+            .unwrap()
+            .extract(&set)
+            .unwrap()
+            .features;
         let data = MeshData::prepare(&set, split.clone(), FeatureOptions::default()).unwrap();
         let train = data.normalized.subset(&split.train).unwrap();
         let extreme = train.as_slice().iter().fold(0f32, |m, x| m.max(x.abs()));
@@ -126,15 +131,15 @@ mod tests {
             (extreme - 0.95).abs() < 1e-3,
             "train range reaches ±0.95: {extreme}"
         );
-        let on_train = Normalization::fit([&data.raw.subset(&split.train).unwrap()]).unwrap();
-        let on_test = Normalization::fit([&data.raw.subset(&split.test).unwrap()]).unwrap();
+        let on_train = Normalization::fit([&raw.subset(&split.train).unwrap()]).unwrap();
+        let on_test = Normalization::fit([&raw.subset(&split.test).unwrap()]).unwrap();
         assert_eq!(data.normalization, on_train);
         assert_ne!(data.normalization, on_test);
 
         let x = data.batch(&[1, 0], &Device::Cpu).unwrap();
         assert_eq!(x.dims(), &[2, set.vertex_count(), CHANNELS]);
         let back = denormalize(&data.normalization, &x).unwrap();
-        for (a, b) in back.frame(0).iter().zip(data.raw.frame(1)) {
+        for (a, b) in back.frame(0).iter().zip(raw.frame(1)) {
             assert!((a - b).abs() < 1e-4, "{a} vs {b}");
         }
         assert!(data.batch(&[99], &Device::Cpu).is_err());

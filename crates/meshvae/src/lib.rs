@@ -50,6 +50,7 @@ mod batch_norm;
 mod checkpoint;
 mod config;
 mod data;
+mod dense;
 mod error;
 mod eval;
 mod folder;
@@ -60,6 +61,7 @@ mod params;
 mod reconstruct;
 mod rng;
 mod split;
+mod sse;
 mod structure;
 mod train;
 

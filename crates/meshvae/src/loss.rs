@@ -63,7 +63,7 @@ fn scalar(t: &Tensor) -> Result<f64> {
 /// mean_b Σ_{v,c} (x − x̂)², a scalar tensor.
 fn mean_sse(x: &Tensor, x_hat: &Tensor) -> Result<Tensor> {
     let batch = x.dim(0)? as f64;
-    Ok(((x - x_hat)?.sqr()?.sum_all()? / batch)?)
+    Ok((crate::sse::sum_sq_diff(x, x_hat)? / batch)?)
 }
 
 /// mean_b ½ Σ_j (μ² + σ² − log(10⁻⁸ + σ²) − 1), a scalar tensor.

@@ -13,10 +13,12 @@ mod vars;
 
 use crate::batch_norm::BatchNorm;
 use crate::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
+use crate::dense::{GradSink, Orientation, dense};
 use crate::error::{Result, VaeError};
 use crate::params::ParamCount;
 use crate::rng::Rng;
 use crate::structure::Layer;
+use candle_core::backprop::GradStore;
 use candle_core::{DType, Device, Tensor, Var};
 use layers::{ConvBlock, Down, GraphConv, LevelOps, Up, Weights};
 use mesh_hierarchy::{Hierarchy, adjacency};
@@ -24,6 +26,7 @@ use spectral_conv::{
     ChebConv, DePool, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv, neighbour_mean_matrix,
 };
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// Train mode: batch norm uses (and updates the running statistics from) the batch.
 /// Eval mode: batch norm uses its running statistics.
@@ -64,6 +67,9 @@ pub struct MeshVae {
     w_sigma: Tensor,
     b_sigma: Tensor,
     b_dec: Tensor,
+    /// Where the backward pass sums the dense weights' gradients (see `dense.rs`).
+    sink_mu: Arc<GradSink>,
+    sink_sigma: Arc<GradSink>,
 }
 
 fn var<'a>(map: &'a BTreeMap<String, Var>, name: &str) -> Result<&'a Var> {
@@ -198,6 +204,8 @@ impl MeshVae {
             w_sigma: t("enc.sigma.weight")?,
             b_sigma: t("enc.sigma.bias")?,
             b_dec: t("dec.fc.bias")?,
+            sink_mu: Arc::default(),
+            sink_sigma: Arc::default(),
             config: config.clone(),
             dtype,
             device: device.clone(),
@@ -289,8 +297,10 @@ impl MeshVae {
         }
         let batch = h.dim(0)?;
         let flat = h.reshape((batch, self.flat_width()))?;
-        let mu = flat.matmul(&self.w_mu)?.broadcast_add(&self.b_mu)?;
-        let s = flat.matmul(&self.w_sigma)?.broadcast_add(&self.b_sigma)?;
+        let mu = dense(&flat, &self.w_mu, Orientation::Plain, &self.sink_mu)?
+            .broadcast_add(&self.b_mu)?;
+        let s = dense(&flat, &self.w_sigma, Orientation::Plain, &self.sink_sigma)?
+            .broadcast_add(&self.b_sigma)?;
         let sigma = (candle_nn::ops::sigmoid(&s)? * 2.0)?.sqrt()?;
         Ok(Encoded { mu, sigma })
     }
@@ -336,7 +346,34 @@ impl MeshVae {
 
     /// The decoder's dense layer: zW_μᵀ + b_dec `[B, V_L·C]`.
     pub(crate) fn decoder_fc(&self, z: &Tensor) -> Result<Tensor> {
-        Ok(z.matmul(&self.w_mu.t()?)?.broadcast_add(&self.b_dec)?)
+        Ok(
+            dense(z, &self.w_mu, Orientation::Transposed, &self.sink_mu)?
+                .broadcast_add(&self.b_dec)?,
+        )
+    }
+
+    /// Gradients of `loss` (a scalar computed by this model) for every variable. Use this rather
+    /// than `loss.backward()`: the dense weights' gradients bypass candle's store to save memory
+    /// (see `dense.rs`) and are put back here.
+    pub fn backward(&self, loss: &Tensor) -> Result<GradStore> {
+        // Contributions left by a `backward()` called directly are stale: drop them.
+        self.sink_mu.take();
+        self.sink_sigma.take();
+        let mut grads = loss.backward()?;
+        for (w, sink) in [
+            (&self.w_mu, &self.sink_mu),
+            (&self.w_sigma, &self.sink_sigma),
+        ] {
+            if let Some(g) = sink.take() {
+                // Terms outside the dense layers (the L2 term of `loss`) went to the store.
+                let g = match grads.remove(w) {
+                    Some(other) => (other + g)?,
+                    None => g,
+                };
+                grads.insert(w, g);
+            }
+        }
+        Ok(grads)
     }
 
     /// The adjoint of the mirror encoder convolution, for a tied decoder block.

@@ -241,17 +241,20 @@ pub(crate) fn channel_moments(x: &Tensor) -> Result<(Vec<f64>, Vec<f64>)> {
     })
 }
 
-/// y = γ (x − m)·s + β for x `[N, C]`, with per-channel m and s = 1/√(v + ε) given.
+/// y = γ (x − m)·s + β for x `[N, C]`, with per-channel m and s = 1/√(v + ε) given, followed
+/// by tanh when `tanh` is set (fused, so the normalised tensor is never stored: one tensor of
+/// the activations' size less per block in the autograd graph).
 /// `batch_stats`: m and v are x's own moments, so the backward pass differentiates through
 /// them (train mode); otherwise they are constants (eval mode).
 pub(crate) fn batch_norm(
     x: &Tensor,
     gamma: &Tensor,
     beta: &Tensor,
-    mean: Vec<f64>,
-    inv_std: Vec<f64>,
+    stats: (Vec<f64>, Vec<f64>),
     batch_stats: bool,
+    tanh: bool,
 ) -> Result<Tensor> {
+    let (mean, inv_std) = stats;
     x.contiguous()?.apply_op3(
         &gamma.contiguous()?,
         &beta.contiguous()?,
@@ -259,6 +262,7 @@ pub(crate) fn batch_norm(
             mean,
             inv_std,
             batch_stats,
+            tanh,
         },
     )
 }
@@ -267,6 +271,7 @@ struct BatchNormOp {
     mean: Vec<f64>,
     inv_std: Vec<f64>,
     batch_stats: bool,
+    tanh: bool,
 }
 
 impl BatchNormOp {
@@ -281,13 +286,35 @@ impl BatchNormOp {
                 for (j, v) in row.iter_mut().enumerate() {
                     *v = T::of((v.to_f64() - self.mean[j]) * scale[j] + beta[j].to_f64());
                 }
+                if self.tanh {
+                    row.iter_mut().for_each(|v| *v = v.tanh());
+                }
             }
         });
         y
     }
 
-    /// (dx, dγ, dβ) from x, γ and the output gradient g.
-    fn backward<T: Real>(&self, x: &[T], gamma: &[T], g: &[T]) -> (Vec<T>, Vec<T>, Vec<T>) {
+    /// (dx, dγ, dβ) from x, γ, the output y and its gradient g.
+    fn backward<T: Real>(
+        &self,
+        x: &[T],
+        gamma: &[T],
+        y: &[T],
+        g: &[T],
+    ) -> (Vec<T>, Vec<T>, Vec<T>) {
+        // Through tanh first: the gradient at the batch norm's output is g·(1 − y²). It is
+        // written into the buffer that becomes dx.
+        let mut dx = g.to_vec();
+        if self.tanh {
+            dx.par_chunks_mut(CHUNK)
+                .zip(y.par_chunks(CHUNK))
+                .for_each(|(d, y)| {
+                    for (d, &y) in d.iter_mut().zip(y) {
+                        *d = *d * (T::of(1.0) - y * y);
+                    }
+                });
+        }
+        let g = &dx;
         let c = self.mean.len();
         let n = x.len() / c;
         // Σ g and Σ g·x̂ per channel, in chunk order.
@@ -315,7 +342,6 @@ impl BatchNormOp {
         let scale: Vec<f64> = (0..c)
             .map(|j| gamma[j].to_f64() * self.inv_std[j])
             .collect();
-        let mut dx = g.to_vec();
         dx.par_chunks_mut(CHUNK * c)
             .zip(x.par_chunks(CHUNK * c))
             .for_each(|(dr, xr)| {
@@ -409,18 +435,21 @@ impl CustomOp3 for BatchNormOp {
         x: &Tensor,
         gamma: &Tensor,
         _beta: &Tensor,
-        _res: &Tensor,
+        res: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
         let grad = grad.contiguous()?;
+        let res = res.contiguous()?;
         let (xs, xl) = x.storage_and_layout();
         let (gs, gl) = gamma.storage_and_layout();
+        let (ys, yl) = res.storage_and_layout();
         let (ds, dl) = grad.storage_and_layout();
         let (
             candle_core::Storage::Cpu(xs),
             candle_core::Storage::Cpu(gs),
+            candle_core::Storage::Cpu(ys),
             candle_core::Storage::Cpu(ds),
-        ) = (&*xs, &*gs, &*ds)
+        ) = (&*xs, &*gs, &*ys, &*ds)
         else {
             bail!("fused-batch-norm: CPU only");
         };
@@ -437,13 +466,38 @@ impl CustomOp3 for BatchNormOp {
             ))
         }
         let c = self.mean.len();
-        let (dx, dgamma, dbeta) = with_slices!(
-            "fused-batch-norm",
-            (xs, xl),
-            (gs, gl),
-            (ds, dl),
-            |x_, g_, d_| tensors(self.backward(x_, g_, d_), x, c)?
-        );
+        const OP: &str = "fused-batch-norm";
+        let (dx, dgamma, dbeta) = match (xs, gs, ys, ds) {
+            (
+                CpuStorage::F32(x_),
+                CpuStorage::F32(g_),
+                CpuStorage::F32(y_),
+                CpuStorage::F32(d_),
+            ) => {
+                let parts = self.backward(
+                    span(OP, x_, xl)?,
+                    span(OP, g_, gl)?,
+                    span(OP, y_, yl)?,
+                    span(OP, d_, dl)?,
+                );
+                tensors(parts, x, c)?
+            }
+            (
+                CpuStorage::F64(x_),
+                CpuStorage::F64(g_),
+                CpuStorage::F64(y_),
+                CpuStorage::F64(d_),
+            ) => {
+                let parts = self.backward(
+                    span(OP, x_, xl)?,
+                    span(OP, g_, gl)?,
+                    span(OP, y_, yl)?,
+                    span(OP, d_, dl)?,
+                );
+                tensors(parts, x, c)?
+            }
+            _ => bail!("{OP}: f32 or f64 inputs of one dtype only"),
+        };
         Ok((Some(dx), Some(dgamma), Some(dbeta)))
     }
 }

@@ -190,7 +190,7 @@ pub fn train(
                     loss.rec, loss.kl, loss.l2, progress.epoch
                 )));
             }
-            let grads = loss.total.backward()?;
+            let grads = model.backward(&loss.total)?;
             adam.step_with_l2(&grads, spec.train.loss.l2)?;
             let w = chunk.len() as f64;
             for (s, v) in sums.iter_mut().zip([total, loss.rec, loss.kl, loss.l2]) {

@@ -149,10 +149,7 @@ fn gradient_check(config: &ModelConfig, hierarchies: &mut Hierarchies) -> (f64, 
         l.total.to_scalar::<f64>().unwrap()
     };
     let grads = model
-        .loss(&x, &eps, &weights)
-        .unwrap()
-        .total
-        .backward()
+        .backward(&model.loss(&x, &eps, &weights).unwrap().total)
         .unwrap();
     let step = 1e-4;
     let (mut worst, mut at) = (0.0f64, String::new());
@@ -357,7 +354,7 @@ fn training_steps_lower_the_loss() {
     for _ in 0..30 {
         let eps = rng.normal_tensor((4, 16), &Device::Cpu).unwrap();
         let loss = model.loss(&x, &eps, &weights).unwrap();
-        adam.step(&loss.total.backward().unwrap()).unwrap();
+        adam.step(&model.backward(&loss.total).unwrap()).unwrap();
     }
     let last = model.rec_error(&x, &weights).unwrap();
     assert!(last < 0.9 * first, "{first} → {last}");
@@ -406,7 +403,7 @@ fn same_seed_same_model_and_save_load_round_trips() {
     );
     // A training step moves a's weights and running statistics away from c's and b's.
     let mut adam = Adam::new(a.trainable_vars(), 1e-3).unwrap();
-    adam.step(&la.total.backward().unwrap()).unwrap();
+    adam.step(&a.backward(&la.total).unwrap()).unwrap();
     let path = temp_path("a.safetensors");
     a.save(&path).unwrap();
     let mut loaded = MeshVae::new(&config, &h, &dev, 99).unwrap();
@@ -527,7 +524,7 @@ fn l2_applied_by_adam_equals_l2_through_autograd() {
         let x = features(4, 162, DType::F32, 20 + step);
         let eps = noise(4, 16, DType::F32, 30 + step);
         let full = a.loss(&x, &eps, &weights).unwrap();
-        adam_a.step(&full.total.backward().unwrap()).unwrap();
+        adam_a.step(&a.backward(&full.total).unwrap()).unwrap();
         let split = b.training_loss(&x, &eps, &weights).unwrap();
         assert!(
             (split.l2 - full.l2).abs() <= 1e-5 * full.l2,
@@ -536,7 +533,7 @@ fn l2_applied_by_adam_equals_l2_through_autograd() {
             full.l2
         );
         adam_b
-            .step_with_l2(&split.total.backward().unwrap(), weights.l2)
+            .step_with_l2(&b.backward(&split.total).unwrap(), weights.l2)
             .unwrap();
     }
     for ((name, va), (_, vb)) in a.trainable_vars().iter().zip(b.trainable_vars()) {

@@ -79,14 +79,11 @@ impl ConvBlock {
     /// Runs the block; `tied` supplies the convolution of a [`Weights::Tied`] block.
     pub fn forward(&self, x: &Tensor, mode: Mode, tied: Option<&GraphConv>) -> Result<Tensor> {
         let y = self.linear(x, tied)?;
-        let y = match &self.bn {
-            Some(bn) => bn.forward(&y, mode)?,
-            None => y,
-        };
-        Ok(if self.spec.tanh {
-            crate::ops::tanh(&y)?
-        } else {
-            y
+        Ok(match (&self.bn, self.spec.tanh) {
+            (Some(bn), true) => bn.forward_tanh(&y, mode)?,
+            (Some(bn), false) => bn.forward(&y, mode)?,
+            (None, true) => crate::ops::tanh(&y)?,
+            (None, false) => y,
         })
     }
 

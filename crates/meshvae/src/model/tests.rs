@@ -53,7 +53,7 @@ fn tied_decoder_convolutions_are_the_adjoints_of_the_encoders() {
         // The gradient of a decoder-only loss reaches the encoder's convolution weights.
         let z = random(&[2, 4], 3);
         let out = model.decode(&z, Mode::Train).unwrap();
-        let grads = out.sum_all().unwrap().backward().unwrap();
+        let grads = model.backward(&out.sum_all().unwrap()).unwrap();
         let name = if conv == ConvKind::Spectral {
             "enc.conv0.weight"
         } else {
