@@ -6,6 +6,8 @@
 //! `cargo bench -p meshvae-benches --bench conv` (needs ../shared/datasets unpacked).
 //! Forward + backward = forward, loss = sum(r ⊙ y) with a fixed random r, `backward()`, with both
 //! the input and the weights requiring gradients (an inner layer of a network).
+//! "vertex-major" rows take and return `[V, B, C]` (`forward_vertex_major`), the layout a network
+//! keeps throughout so that no layer transposes.
 //! Pooling and de-pooling use mesh-hierarchy's operators for our pooler (modified QEM to half the
 //! vertices, mean pooling, de-pooling by copy).
 
@@ -180,6 +182,17 @@ fn conv(c: &mut Criterion) {
             }
             group.measurement_time(Duration::from_secs(4));
         }
+        // The vertex-major layout [V, B, C] a network keeps throughout (no transposes).
+        let x_vm = Var::from_tensor(&random((v, BATCH, CHANNELS), 2)).expect("var");
+        let conv_vm =
+            ChebConv::from_weights(op.clone(), 3, w.as_tensor().clone(), None).expect("layer");
+        let forward_vm = move |t: &Tensor| conv_vm.forward_vertex_major(t).expect("forward");
+        group.bench_function("cheb K=3 fwd, fused kernel, vertex-major", |b| {
+            b.iter(|| black_box(forward_vm(x_vm.as_tensor())))
+        });
+        group.bench_function("cheb K=3 fwd+bwd, fused kernel, vertex-major", |b| {
+            b.iter(|| fwd_bwd(&forward_vm, &x_vm, None))
+        });
         for (label, backend) in [
             ("custom op", Backend::Kernel),
             ("fallback", Backend::Fallback),
@@ -226,6 +239,24 @@ fn conv(c: &mut Criterion) {
         group.bench_function(format!("de-pool {coarse_v}->{v} fwd+bwd"), |b| {
             b.iter(|| fwd_bwd(depool_fwd, &coarse, None))
         });
+        let coarse_vm = Var::from_tensor(&random((coarse_v, BATCH, CHANNELS), 4)).expect("var");
+        let pool_vm = |t: &Tensor| pool.forward_vertex_major(t).expect("pool");
+        let depool_vm = |t: &Tensor| depool.forward_vertex_major(t).expect("de-pool");
+        group.bench_function(
+            format!("mean pool {v}->{coarse_v} fwd, vertex-major"),
+            |b| b.iter(|| black_box(pool_vm(x_vm.as_tensor()))),
+        );
+        group.bench_function(
+            format!("mean pool {v}->{coarse_v} fwd+bwd, vertex-major"),
+            |b| b.iter(|| fwd_bwd(pool_vm, &x_vm, None)),
+        );
+        group.bench_function(format!("de-pool {coarse_v}->{v} fwd, vertex-major"), |b| {
+            b.iter(|| black_box(depool_vm(coarse_vm.as_tensor())))
+        });
+        group.bench_function(
+            format!("de-pool {coarse_v}->{v} fwd+bwd, vertex-major"),
+            |b| b.iter(|| fwd_bwd(depool_vm, &coarse_vm, None)),
+        );
         group.finish();
     }
 }

@@ -8,8 +8,10 @@
 //! `cheb_kernel.rs`); elsewhere it is the same recurrence written with [`SparseOp`] products and
 //! candle ops ([`ChebConv::forward_unfused`]), which runs on any device.
 
+use crate::cheb_kernel::MAX_K;
 use crate::cheb_op::ChebOp;
 use crate::error::{ConvError, Result};
+use crate::layout::Io;
 use crate::spmm::{SparseOp, use_kernel};
 use candle_core::Tensor;
 use candle_nn::{Init, VarBuilder};
@@ -154,25 +156,59 @@ impl ChebConv {
     /// where it can run, [`Self::forward_unfused`] otherwise.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let (x3, squeeze) = self.check("ChebConv::forward", x)?;
-        let y = if use_kernel(self.laplacian.backend(), &x3) && self.weight.device().is_cpu() {
-            let op = ChebOp::new(
-                self.laplacian.csr().clone(),
-                self.laplacian.csr_t().clone(),
-                self.k,
-            );
-            x3.contiguous()?.apply_op2(&self.weight.contiguous()?, op)?
-        } else {
-            self.unfused(&x3)?
+        let y = match self.fused(&x3, Io::BatchMajor)? {
+            Some(y) => y,
+            None => self.add_bias(self.unfused(&x3)?)?,
         };
-        self.finish(y, squeeze)
+        Ok(if squeeze { y.squeeze(0)? } else { y })
+    }
+
+    /// y `[V, B, C_out]` from x `[V, B, C_in]`: the vertex-major layout, in which a network
+    /// keeps its activations so that no layer transposes (see [`crate::SparseOp`]'s
+    /// `apply_vertex_major`). Same results as [`Self::forward`] on the permuted tensors.
+    pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+        const OP: &str = "ChebConv::forward_vertex_major";
+        if x.rank() != 3 {
+            return Err(ConvError::input(
+                OP,
+                format!("input of shape {:?}; expected [V, B, C]", x.dims()),
+            ));
+        }
+        let (x3, _) = self.check(OP, &x.transpose(0, 1)?)?;
+        if let Some(y) = self.fused(x, Io::VertexBatch)? {
+            return Ok(y);
+        }
+        let y = self.add_bias(self.unfused(&x3.contiguous()?)?)?;
+        Ok(y.transpose(0, 1)?.contiguous()?)
+    }
+
+    /// The fused op on x in layout `io`, if it can run (CPU, f32/f64, K ≤ 8).
+    fn fused(&self, x: &Tensor, io: Io) -> Result<Option<Tensor>> {
+        let usable = use_kernel(self.laplacian.backend(), x)
+            && self.weight.device().is_cpu()
+            && self.k <= MAX_K;
+        if !usable {
+            return Ok(None);
+        }
+        let op = ChebOp::new(
+            self.laplacian.csr().clone(),
+            self.laplacian.csr_t().clone(),
+            self.k,
+            io,
+        );
+        let (x, w) = (x.contiguous()?, self.weight.contiguous()?);
+        Ok(Some(match &self.bias {
+            Some(b) => x.apply_op3(&w, &b.contiguous()?, op)?,
+            None => x.apply_op2(&w, op)?,
+        }))
     }
 
     /// The recurrence written with [`SparseOp`] products (kernel or fallback, per the Laplacian's
     /// backend) and candle ops: stack the terms to `[B, V, C_in, K]`, one matmul with W.
     pub fn forward_unfused(&self, x: &Tensor) -> Result<Tensor> {
         let (x3, squeeze) = self.check("ChebConv::forward_unfused", x)?;
-        let y = self.unfused(&x3)?;
-        self.finish(y, squeeze)
+        let y = self.add_bias(self.unfused(&x3)?)?;
+        Ok(if squeeze { y.squeeze(0)? } else { y })
     }
 
     fn unfused(&self, x: &Tensor) -> Result<Tensor> {
@@ -218,12 +254,11 @@ impl ChebConv {
         Ok((x3, squeeze))
     }
 
-    fn finish(&self, y: Tensor, squeeze: bool) -> Result<Tensor> {
-        let y = match &self.bias {
+    fn add_bias(&self, y: Tensor) -> Result<Tensor> {
+        Ok(match &self.bias {
             Some(b) => y.broadcast_add(b)?,
             None => y,
-        };
-        Ok(if squeeze { y.squeeze(0)? } else { y })
+        })
     }
 }
 
@@ -390,6 +425,7 @@ mod tests {
         // buffers large enough to be recycled (scratch.rs) between the rounds.
         let m = random_matrix(300, 300, 0.015, 90);
         let op = SparseOp::new(&m, &Device::Cpu).unwrap();
+        let _lock = crate::kernel::BASELINE_LOCK.lock();
         let _guard = BaselineGuard;
         for baseline in [false, true] {
             crate::kernel::FORCE_BASELINE.store(baseline, std::sync::atomic::Ordering::Relaxed);

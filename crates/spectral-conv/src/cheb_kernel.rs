@@ -1,22 +1,25 @@
-//! Fused Chebyshev-convolution kernels: y = Σ_{k<K} T_k(L̃) x W_k on flat `[B, V, C]` slices.
+//! Fused Chebyshev-convolution kernels: y = Σ_{k<K} T_k(L̃) x W_k + b, with T_0 = x,
+//! T_1 = L̃ x, T_k = 2 L̃ T_{k−1} − T_{k−2}, and their backward pass.
 //!
-//! Why fused: the op-by-op version writes and re-reads every T_k and its stacked copy (a dozen
-//! passes over [B, V, C] arrays); here the forward pass stores only T_0 … T_{K−2} and computes the
-//! last term and the channel mixing vertex by vertex, and the backward pass evaluates
-//! dx = Σ_k T_k(L̃ᵀ) (g W_kᵀ) by Clenshaw's recurrence
-//! (b_k = g W_kᵀ + 2 L̃ᵀ b_{k+1} − b_{k+2}, dx = g W_0ᵀ + L̃ᵀ b_1 − b_2: K − 1 sparse passes),
-//! accumulating dW in the sweep that starts it.
+//! Forward: T_1 … T_{K−2} are stored (channel-major, for the backward pass), then one sweep
+//! computes T_{K−1} vertex by vertex from a gather of T_{K−2} and mixes all K terms (plus the
+//! bias) into y. K = 3: one stored term, two sparse passes.
 //!
-//! Internal layout: channel-major blocks `[V, C, B]` (see `kernel.rs`). The channel mixing
-//! (per vertex a `[27] → [9]` map applied to B = 32 rows, the bulk of the arithmetic) keeps
-//! 8 batch lanes × 9 outputs in registers while it walks the 27 inputs ([`mix`]).
+//! Backward (A = L̃, g the output gradient; nothing assumes A symmetric, Aᵀ is stored): one sweep
+//! gathers h = Aᵀ g and accumulates, per chunk of vertices, dW_k = T_kᵀ g (k ≤ K−2),
+//! P = T_{K−2}ᵀ h (then dW_{K−1} = c·P − dW_{K−3}, since T_{K−1} = c A T_{K−2} − T_{K−3}) and
+//! db = Σ g, and writes the Clenshaw term b_{K−2} = g W_{K−2}ᵀ + c h W_{K−1}ᵀ (c = 2, or 1 for
+//! K = 2). Then b_k = g W_kᵀ + 2 Aᵀ b_{k+1} − b_{k+2} down to dx = b_0 (coefficient 1), one
+//! sparse pass each: K = 3 takes two sweeps in all. Chunk partial sums are reduced in chunk
+//! order, so gradients are bit-reproducible whatever the thread count.
 //!
+//! Arrays: x and g arrive as vertex-major [`Blocks`] (`[B, V, C]` data is converted first), y
+//! and dx leave through [`ChunkOut`] in the caller's layout; the intermediates are `[V, C, B]`.
 //! Weight layout as the authors': W is `[C_in·K, C_out]`, row `fin·K + k`.
 
-use crate::kernel::{
-    CHUNK_ROWS, ChunkOut, Csr, Madd, Real, Staging, chunk_outs, chunk_span, gather_row, load_chunk,
-    multiversion, spmm_axpby, to_channel_major,
-};
+use crate::kernel::{CHUNK_ROWS, Csr, Madd, Real, Staging, chunk_span, multiversion};
+use crate::layout::{Blocks, ChunkOut, Io, chunk_outs};
+use crate::mix::{LANES, MixDims, dot_chunk, mix};
 use crate::scratch;
 use rayon::prelude::*;
 
@@ -30,8 +33,9 @@ pub(crate) struct ChebShape {
     pub k: usize,
 }
 
-/// Batch lanes processed together (one AVX register of f32).
-const LANES: usize = 8;
+/// The largest K the fused kernels take (a vertex's K term blocks are listed on the stack);
+/// larger K runs unfused.
+pub(crate) const MAX_K: usize = 8;
 
 /// W rearranged k-major: `wk[(k·ci + f)·co + o] = W[(f·K + k)·co + o]` (inputs × outputs).
 fn weights_k_major<T: Real>(w: &[T], s: &ChebShape) -> Vec<T> {
@@ -44,205 +48,140 @@ fn weights_k_major<T: Real>(w: &[T], s: &ChebShape) -> Vec<T> {
     wk
 }
 
-/// W transposed per order: `wt[(k·co + o)·ci + f] = W[(f·K + k)·co + o]`, for g W_kᵀ.
-fn weights_transposed<T: Real>(w: &[T], s: &ChebShape) -> Vec<T> {
-    let mut wt = Vec::with_capacity(w.len());
-    for k in 0..s.k {
-        for o in 0..s.co {
-            wt.extend((0..s.ci).map(|f| w[(f * s.k + k) * s.co + o]));
+/// α · W_kᵀ + β · W_jᵀ as `[co, ci]` (rows: outputs of the forward map, the inputs of g W_kᵀ).
+fn weights_t<T: Real>(
+    w: &[T],
+    s: &ChebShape,
+    (alpha, k): (f64, usize),
+    other: Option<(f64, usize)>,
+) -> Vec<T> {
+    let at = |k: usize, o: usize, f: usize| w[(f * s.k + k) * s.co + o].to_f64();
+    let mut wt = Vec::with_capacity(s.co * s.ci);
+    for o in 0..s.co {
+        for f in 0..s.ci {
+            let extra = other.map_or(0.0, |(beta, j)| beta * at(j, o, f));
+            wt.push(T::from_f64(alpha * at(k, o, f) + extra));
         }
     }
     wt
 }
 
-/// out[p, :] (+)= Σ_q m[q·P + p] · inp[q, :] on channel-major blocks (`inp` `[Q, B]`, `out`
-/// `[P, B]`); with `accumulate` out is added to, else overwritten. `P` is the output count when
-/// known at compile time (then 8 lanes × P outputs stay in registers), 0 when only `p_dyn` is.
-#[inline(always)]
-fn mix<T: Real, M: Madd, const P: usize>(
-    inp: &[T],
-    m: &[T],
-    p_dyn: usize,
-    batch: usize,
-    out: &mut [T],
-    accumulate: bool,
-) {
-    let p_n = if P == 0 { p_dyn } else { P };
-    let q_n = inp.len() / batch;
-    let mut done = 0;
-    if P > 0 {
-        done = batch - batch % LANES;
-        for lb in (0..done).step_by(LANES) {
-            let mut acc = [[T::ZERO; LANES]; P];
-            if accumulate {
-                for (p, a) in acc.iter_mut().enumerate() {
-                    a.copy_from_slice(&out[p * batch + lb..][..LANES]);
-                }
-            }
-            for q in 0..q_n {
-                let x = &inp[q * batch + lb..][..LANES];
-                let m_q = &m[q * P..][..P];
-                for (a, &w) in acc.iter_mut().zip(m_q) {
-                    for (z, &xv) in a.iter_mut().zip(x) {
-                        *z = M::madd(xv, w, *z);
-                    }
-                }
-            }
-            for (p, a) in acc.iter().enumerate() {
-                out[p * batch + lb..][..LANES].copy_from_slice(a);
-            }
-        }
-    }
-    if done < batch {
-        // Remaining lanes (all of them when P is not fixed): axpy rows.
-        for p in 0..p_n {
-            let o = &mut out[p * batch + done..(p + 1) * batch];
-            if !accumulate {
-                o.fill(T::ZERO);
-            }
-            for q in 0..q_n {
-                let w = m[q * p_n + p];
-                for (z, &xv) in o.iter_mut().zip(&inp[q * batch + done..(q + 1) * batch]) {
-                    *z = M::madd(xv, w, *z);
-                }
-            }
-        }
-    }
-}
-
-/// acc[p][l] += Σ_j t[j·8 + l] · g[p, j·8 + l]: lane-parallel batch dot products of one input
-/// row with every output row (dW = Σ Tᵀ g without reassociating float sums). With `P` fixed,
-/// the P accumulators stay in registers and advance together (independent FMA chains).
-#[inline(always)]
-fn dot_lanes<T: Real, M: Madd, const P: usize>(
-    t: &[T],
-    g: &[T],
-    batch: usize,
-    acc: &mut [[T; LANES]],
-) {
-    let full = batch - batch % LANES;
-    if P > 0 {
-        let mut regs = [[T::ZERO; LANES]; P];
-        regs.copy_from_slice(&acc[..P]);
-        for lb in (0..full).step_by(LANES) {
-            let tv = &t[lb..][..LANES];
-            for (p, r) in regs.iter_mut().enumerate() {
-                let gv = &g[p * batch + lb..][..LANES];
-                for ((z, &a), &b) in r.iter_mut().zip(tv).zip(gv) {
-                    *z = M::madd(a, b, *z);
-                }
-            }
-        }
-        acc[..P].copy_from_slice(&regs);
-    } else {
-        for (p, a) in acc.iter_mut().enumerate() {
-            let g_p = &g[p * batch..][..batch];
-            for (tc, gc) in t[..full]
-                .chunks_exact(LANES)
-                .zip(g_p[..full].chunks_exact(LANES))
-            {
-                for ((z, &tv), &gv) in a.iter_mut().zip(tc).zip(gc) {
-                    *z = M::madd(tv, gv, *z);
-                }
-            }
-        }
-    }
-    for (p, a) in acc.iter_mut().enumerate() {
-        let g_p = &g[p * batch..][..batch];
-        for ((z, &tv), &gv) in a.iter_mut().zip(&t[full..]).zip(&g_p[full..]) {
-            *z = M::madd(tv, gv, *z);
-        }
-    }
-}
-
-/// T_0 … T_{K−2} (at least T_0), channel-major `[V, ci, B]`: what later terms gather from.
-pub(crate) fn stored_terms<T: Real>(a: &Csr, x: &[T], s: &ChebShape) -> Vec<Vec<T>> {
+/// T_1 … T_{K−2} (none for K ≤ 2), channel-major `[V, ci, B]`: what the later sweeps read.
+pub(crate) fn stored_terms<T: Real>(a: &Csr, x: Blocks<'_, T>, s: &ChebShape) -> Vec<Vec<T>> {
     let n = s.batch * s.ci;
-    let mut terms = vec![to_channel_major(x, s.batch, s.v, s.ci)];
+    let mut terms: Vec<Vec<T>> = Vec::new();
     for k in 1..s.k.saturating_sub(1) {
         let mut out = scratch::take(s.v * n);
-        if k == 1 {
-            spmm_axpby(a, T::from_f64(1.0), &terms[0], T::ZERO, None, &mut out, n);
-        } else {
-            let (two, minus_one) = (T::from_f64(2.0), T::from_f64(-1.0));
-            let (src, prev) = (&terms[k - 1], &terms[k - 2]);
-            spmm_axpby(a, two, src, minus_one, Some(prev), &mut out, n);
+        let term = |j: usize| match j {
+            0 => x,
+            _ => Blocks::channel_major(&terms[j - 1], s.batch, s.ci),
+        };
+        let (src, prev) = (term(k - 1), (k >= 2).then(|| term(k - 2)));
+        if n > 0 {
+            out.par_chunks_mut(CHUNK_ROWS * n)
+                .enumerate()
+                .for_each_init(Staging::new, |staging, (chunk, out)| {
+                    term_chunk(a, src, prev, s, chunk, out, staging)
+                });
         }
         terms.push(out);
     }
     terms
 }
 
-/// T_{K−1} at vertex i (a `[ci, B]` block) into `last`.
+multiversion!(
+    #[allow(clippy::too_many_arguments)]
+    fn term_chunk<T>(
+        a: &Csr,
+        src: Blocks<'_, T>,
+        prev: Option<Blocks<'_, T>>,
+        s: &ChebShape,
+        chunk: usize,
+        out: &mut [T],
+        staging: &mut Staging<T>,
+    ) => term_chunk_body
+);
+
+/// out = A src (+ 2 A src − prev when `prev` is given) over one chunk.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn last_term<T: Real, M: Madd>(
+fn term_chunk_body<T: Real, M: Madd>(
     a: &Csr,
-    terms: &[Vec<T>],
-    k_count: usize,
-    i: usize,
-    last: &mut [T],
+    src: Blocks<'_, T>,
+    prev: Option<Blocks<'_, T>>,
+    s: &ChebShape,
+    chunk: usize,
+    out: &mut [T],
+    staging: &mut Staging<T>,
 ) {
-    let n = last.len();
-    if k_count == 1 {
-        last.copy_from_slice(&terms[0][i * n..][..n]);
-        return;
-    }
-    let (cols, vals) = a.row::<T>(i);
-    gather_row::<T, M>(cols, vals, &terms[k_count - 2], n, last);
-    if k_count >= 3 {
-        let two = T::from_f64(2.0);
-        for (z, &p) in last.iter_mut().zip(&terms[k_count - 3][i * n..][..n]) {
-            *z = two * *z - p;
+    let n = s.batch * s.ci;
+    let (i0, cnt) = chunk_span(chunk, s.v);
+    let [tmp, pbuf] = staging.get([n, cnt * n]);
+    let prev = prev.map(|p| p.chunk(i0, cnt, pbuf));
+    for (li, o) in out.chunks_exact_mut(n).enumerate() {
+        let (cols, vals) = a.row::<T>(i0 + li);
+        src.gather::<M>(cols, vals, tmp, o);
+        if let Some(prev) = prev {
+            let two = T::from_f64(2.0);
+            for (z, &p) in o.iter_mut().zip(&prev[li * n..][..n]) {
+                *z = two * *z - p;
+            }
         }
     }
 }
 
-/// The `[ci, B]` block of T_k at vertex i: stored, or `last` for k = K − 1.
-#[inline(always)]
-fn term_block<'a, T>(
-    terms: &'a [Vec<T>],
-    last: &'a [T],
-    k: usize,
-    k_count: usize,
-    i: usize,
-) -> &'a [T] {
-    if k + 1 == k_count {
-        last
-    } else {
-        &terms[k][i * last.len()..][..last.len()]
-    }
-}
-
-/// out = inp · m with `P` fixed at 9 (the feature width) where it applies.
-#[inline(always)]
-fn mix_any<T: Real, M: Madd>(inp: &[T], m: &[T], p: usize, batch: usize, out: &mut [T], acc: bool) {
-    match p {
-        9 => mix::<T, M, 9>(inp, m, p, batch, out, acc),
-        _ => mix::<T, M, 0>(inp, m, p, batch, out, acc),
-    }
-}
-
-/// Forward: returns y `[B, V, co]` and the stored terms (for the backward pass).
-pub(crate) fn forward<T: Real>(a: &Csr, x: &[T], w: &[T], s: &ChebShape) -> (Vec<T>, Vec<Vec<T>>) {
+/// Forward: y (layout `io`, a fresh vector for candle) and the stored terms T_1 … T_{K−2}.
+pub(crate) fn forward<T: Real>(
+    a: &Csr,
+    x: Blocks<'_, T>,
+    w: &[T],
+    bias: Option<&[T]>,
+    s: &ChebShape,
+    io: Io,
+) -> (Vec<T>, Vec<Vec<T>>) {
     let terms = stored_terms(a, x, s);
     let wk = weights_k_major(w, s);
     let mut y = vec![T::ZERO; s.batch * s.v * s.co];
-    chunk_outs(&mut y, false, (s.batch, s.v, s.co))
+    let ctx = Ctx {
+        a,
+        x,
+        terms: &terms,
+        s,
+    };
+    chunk_outs(&mut y, io, (s.batch, s.v, s.co))
         .into_par_iter()
         .enumerate()
         .for_each_init(Staging::new, |staging, (chunk, dest)| {
-            forward_chunk(a, &terms, &wk, s, chunk, dest, staging)
+            forward_chunk(&ctx, &wk, bias, chunk, dest, staging)
         });
     (y, terms)
 }
 
+/// What every sweep reads: the operator, x and the stored terms.
+struct Ctx<'a, T> {
+    a: &'a Csr,
+    x: Blocks<'a, T>,
+    terms: &'a [Vec<T>],
+    s: &'a ChebShape,
+}
+
+impl<T: Real> Ctx<'_, T> {
+    /// T_k (k ≤ K−2) of a chunk, `[cnt, ci, B]`; `xc` is x's chunk.
+    #[inline(always)]
+    fn term<'b>(&'b self, k: usize, xc: &'b [T], (i0, cnt): (usize, usize)) -> &'b [T] {
+        let n = self.s.ci * self.s.batch;
+        match k {
+            0 => xc,
+            _ => &self.terms[k - 1][i0 * n..][..cnt * n],
+        }
+    }
+}
+
 multiversion!(
-    #[allow(clippy::too_many_arguments)]
     fn forward_chunk<T>(
-        a: &Csr,
-        terms: &[Vec<T>],
+        ctx: &Ctx<'_, T>,
         wk: &[T],
-        s: &ChebShape,
+        bias: Option<&[T]>,
         chunk: usize,
         dest: ChunkOut<'_, T>,
         staging: &mut Staging<T>,
@@ -251,115 +190,197 @@ multiversion!(
 
 #[inline(always)]
 fn forward_chunk_body<T: Real, M: Madd>(
-    a: &Csr,
-    terms: &[Vec<T>],
+    ctx: &Ctx<'_, T>,
     wk: &[T],
-    s: &ChebShape,
+    bias: Option<&[T]>,
     chunk: usize,
     mut dest: ChunkOut<'_, T>,
     staging: &mut Staging<T>,
 ) {
-    let (batch, ci, co) = (s.batch, s.ci, s.co);
+    let s = ctx.s;
+    let (n, n_out) = (s.ci * s.batch, s.co * s.batch);
     let (i0, cnt) = chunk_span(chunk, s.v);
-    let [last, out, _] = staging.get([ci * batch, cnt * co * batch, 0]);
-    for (li, y) in out.chunks_exact_mut(co * batch).enumerate() {
-        let i = i0 + li;
-        last_term::<T, M>(a, terms, s.k, i, last);
-        for k in 0..s.k {
-            let block = term_block(terms, last, k, s.k, i);
-            mix_any::<T, M>(block, &wk[k * ci * co..][..ci * co], co, batch, y, k > 0);
+    let [xbuf, tmp, last, ybuf] = staging.get([cnt * n, n, n, cnt * n_out]);
+    let xc = ctx.x.chunk(i0, cnt, xbuf);
+    let chunks: [&[T]; MAX_K] = std::array::from_fn(|k| {
+        if k + 1 < s.k {
+            ctx.term(k, xc, (i0, cnt))
+        } else {
+            &[]
+        }
+    });
+    let bufs = (tmp, last);
+    // No closure here: closures are not compiled with the caller's target features.
+    match dest.direct() {
+        Some(out) => forward_rows::<T, M>(ctx, wk, bias, (i0, xc, &chunks), bufs, out),
+        None => {
+            forward_rows::<T, M>(ctx, wk, bias, (i0, xc, &chunks), bufs, ybuf);
+            dest.store(ybuf);
         }
     }
-    dest.store(out);
 }
 
-/// Backward: given the output gradient `g` `[B, V, co]`, returns dx `[B, V, ci]` (if `need_x`)
-/// and dW `[ci·K, co]` (if `need_w`). `at` is L̃ᵀ; `terms` are the forward's stored terms.
+/// The forward pass's output rows of one chunk (see [`forward_chunk_body`]).
+#[inline(always)]
+fn forward_rows<T: Real, M: Madd>(
+    ctx: &Ctx<'_, T>,
+    wk: &[T],
+    bias: Option<&[T]>,
+    (i0, xc, chunks): (usize, &[T], &[&[T]; MAX_K]),
+    (tmp, last): (&mut [T], &mut [T]),
+    out: &mut [T],
+) {
+    let s = ctx.s;
+    let (n, n_out) = (s.ci * s.batch, s.co * s.batch);
+    for (li, y) in out.chunks_exact_mut(n_out).enumerate() {
+        let mut inps: [&[T]; MAX_K] = [&[]; MAX_K];
+        for (inp, c) in inps.iter_mut().zip(&chunks[..s.k - 1]) {
+            *inp = &c[li * n..][..n];
+        }
+        // T_{K−1}: x itself, A x, or 2 A T_{K−2} − T_{K−3}.
+        if s.k == 1 {
+            inps[0] = &xc[li * n..][..n];
+        } else {
+            let (cols, vals) = ctx.a.row::<T>(i0 + li);
+            let src = match s.k {
+                2 => ctx.x,
+                _ => Blocks::channel_major(&ctx.terms[s.k - 3], s.batch, s.ci),
+            };
+            src.gather::<M>(cols, vals, tmp, last);
+            if s.k >= 3 {
+                let two = T::from_f64(2.0);
+                for (z, &p) in last.iter_mut().zip(inps[s.k - 3]) {
+                    *z = two * *z - p;
+                }
+            }
+            inps[s.k - 1] = last;
+        }
+        let d = MixDims {
+            p: s.co,
+            batch: s.batch,
+        };
+        mix::<T, M>(&inps[..s.k], wk, d, bias, y);
+    }
+}
+
+/// The gradients asked for: dx (in the caller's layout), dW `[ci·K, co]`, db `[co]`.
+pub(crate) struct Grads<T> {
+    pub dx: Option<Vec<T>>,
+    pub dw: Option<Vec<T>>,
+    pub db: Option<Vec<T>>,
+}
+
+/// Which gradients to compute.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Need {
+    pub x: bool,
+    pub w: bool,
+    pub b: bool,
+}
+
+/// Backward: given the output gradient `g`, x and the forward's stored terms.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn backward<T: Real>(
     a: &Csr,
     at: &Csr,
+    x: Blocks<'_, T>,
     terms: &[Vec<T>],
     w: &[T],
-    g: &[T],
+    g: Blocks<'_, T>,
     s: &ChebShape,
-    (need_x, need_w): (bool, bool),
-) -> (Option<Vec<T>>, Option<Vec<T>>) {
-    if !need_x && !need_w {
-        return (None, None);
-    }
-    let wt = weights_transposed(w, s);
+    io: Io,
+    need: Need,
+) -> Grads<T> {
+    let k = s.k;
     let size = s.batch * s.v * s.ci;
-    let n_w = s.k * s.ci * s.co;
-    // b_{K−1} = g W_{K−1}ᵀ (channel-major); for K = 1 it is dx itself (batch-major).
-    // (dx itself is handed to candle: a fresh buffer; the rest is recycled.)
-    let fresh_or_recycled = |internal: bool| {
+    let n_w = k * s.ci * s.co;
+    // Sweep 1 writes b_{K−2} (kept, channel-major) or, for K ≤ 2, dx itself (handed to candle).
+    let internal = k >= 3;
+    let mut first = need.x.then(|| {
         if internal {
             scratch::take(size)
         } else {
             vec![T::ZERO; size]
         }
+    });
+    let w1 = match k {
+        1 => weights_t(w, s, (1.0, 0), None),
+        _ => {
+            let c = if k >= 3 { 2.0 } else { 1.0 };
+            let mut w1 = weights_t(w, s, (1.0, k - 2), None);
+            w1.extend(weights_t::<T>(w, s, (c, k - 1), None));
+            w1
+        }
     };
-    let mut b_next = need_x.then(|| fresh_or_recycled(s.k > 1));
-    let dests = match b_next.as_deref_mut() {
-        Some(h) => chunk_outs(h, s.k > 1, (s.batch, s.v, s.ci)),
+    let dests = match first.as_deref_mut() {
+        Some(out) => {
+            let out_io = if internal { Io::VertexChannel } else { io };
+            chunk_outs(out, out_io, (s.batch, s.v, s.ci))
+        }
         None => (0..s.v.div_ceil(CHUNK_ROWS))
             .map(|_| ChunkOut::Discard)
             .collect(),
     };
-    let dw = dests
+    let ctx = Ctx { a, x, terms, s };
+    let sums = (need.w || need.b).then_some(n_w + s.co);
+    let partials: Vec<Vec<f64>> = dests
         .into_par_iter()
         .enumerate()
-        .fold(
-            || (vec![0.0f64; n_w], Staging::new()),
-            |(mut acc, mut staging), (chunk, dest)| {
-                let mut lanes = vec![[T::ZERO; LANES]; if need_w { n_w } else { 0 }];
-                sweep_chunk(a, terms, g, &wt, s, chunk, dest, &mut lanes, &mut staging);
-                for (z, l) in acc.iter_mut().zip(&lanes) {
-                    *z += l.iter().map(|v| v.to_f64()).sum::<f64>();
-                }
-                (acc, staging)
-            },
-        )
-        .map(|(acc, _)| acc)
-        .reduce(
-            || vec![0.0f64; n_w],
-            |mut p, q| {
-                p.iter_mut().zip(q).for_each(|(x, y)| *x += y);
-                p
-            },
-        );
-    let dw = need_w.then(|| weights_from_k_major(&dw, s));
-    let Some(mut b_next) = b_next else {
-        return (None, dw);
-    };
-    if s.k == 1 {
-        return (Some(b_next), dw);
+        .map_init(Staging::new, |staging, (chunk, dest)| {
+            sweep_chunk(&ctx, at, g, &w1, (chunk, sums, need.w), dest, staging)
+        })
+        .collect();
+    let mut total = vec![0.0f64; n_w + s.co];
+    for p in &partials {
+        total.iter_mut().zip(p).for_each(|(t, v)| *t += v);
     }
-    let mut b_after: Option<Vec<T>> = None;
-    let block = s.co * s.ci;
-    for k in (0..s.k - 1).rev() {
-        let alpha = T::from_f64(if k == 0 { 1.0 } else { 2.0 });
-        let mut out = fresh_or_recycled(k > 0);
-        // b_{k+2} = b_{K−1} is g W_{K−1}ᵀ itself: subtract it through the weights
-        // (g (W_kᵀ − W_{K−1}ᵀ)) rather than re-read it.
-        let combined: Vec<T>;
-        let (wt_k, after) = if k + 2 == s.k - 1 {
-            let last = &wt[(s.k - 1) * block..][..block];
-            combined = (wt[k * block..][..block].iter().zip(last))
-                .map(|(&p, &q)| p - q)
-                .collect();
-            (&combined[..], None)
+    let dw = need.w.then(|| weights_from_k_major::<T>(&total[..n_w], s));
+    let db = need
+        .b
+        .then(|| total[n_w..].iter().map(|&v| T::from_f64(v)).collect());
+    let dx = first.map(|b| {
+        if internal {
+            clenshaw(at, w, g, b, s, io)
         } else {
-            (&wt[k * block..][..block], b_after.as_deref())
+            b
+        }
+    });
+    Grads { dx, dw, db }
+}
+
+/// Clenshaw's recurrence from b_{K−2} (K ≥ 3) down to dx = b_0, in layout `io`.
+fn clenshaw<T: Real>(
+    at: &Csr,
+    w: &[T],
+    g: Blocks<'_, T>,
+    b_first: Vec<T>,
+    s: &ChebShape,
+    io: Io,
+) -> Vec<T> {
+    let size = s.batch * s.v * s.ci;
+    let mut b_next = b_first;
+    let mut b_after: Option<Vec<T>> = None;
+    for k in (0..=s.k - 3).rev() {
+        let alpha = T::from_f64(if k == 0 { 1.0 } else { 2.0 });
+        let mut out = if k > 0 {
+            scratch::take(size)
+        } else {
+            vec![T::ZERO; size]
         };
-        // The intermediate b_k are gathered from later: channel-major; dx goes out batch-major.
-        chunk_outs(&mut out, k > 0, (s.batch, s.v, s.ci))
+        // b_{k+2} = b_{K−1} = g W_{K−1}ᵀ was never stored: subtract it through the weights.
+        let (wt_k, after) = if k + 2 == s.k - 1 {
+            (weights_t(w, s, (1.0, k), Some((-1.0, s.k - 1))), None)
+        } else {
+            (weights_t(w, s, (1.0, k), None), b_after.as_deref())
+        };
+        let out_io = if k > 0 { Io::VertexChannel } else { io };
+        let next = Blocks::channel_major(&b_next, s.batch, s.ci);
+        chunk_outs(&mut out, out_io, (s.batch, s.v, s.ci))
             .into_par_iter()
             .enumerate()
             .for_each_init(Staging::new, |staging, (chunk, dest)| {
                 let step = (alpha, after);
-                clenshaw_chunk(at, g, wt_k, step, &b_next, s, chunk, dest, staging)
+                clenshaw_chunk(at, g, &wt_k, step, next, s, chunk, dest, staging)
             });
         if let Some(done) = b_after.replace(std::mem::replace(&mut b_next, out)) {
             scratch::give(done);
@@ -368,11 +389,21 @@ pub(crate) fn backward<T: Real>(
     if let Some(done) = b_after {
         scratch::give(done);
     }
-    (Some(b_next), dw)
+    b_next
 }
 
-/// dW from the k-major accumulation order back to the `[ci·K, co]` layout.
-fn weights_from_k_major<T: Real>(dw: &[f64], s: &ChebShape) -> Vec<T> {
+/// dW from the k-major accumulation order back to the `[ci·K, co]` layout, with
+/// dW_{K−1} = c·P − dW_{K−3} (see the module comment).
+fn weights_from_k_major<T: Real>(acc: &[f64], s: &ChebShape) -> Vec<T> {
+    let block = s.ci * s.co;
+    let mut dw = acc.to_vec();
+    if s.k >= 3 {
+        let (head, last) = dw.split_at_mut((s.k - 1) * block);
+        let prev = &head[(s.k - 3) * block..][..block];
+        for (z, &p) in last.iter_mut().zip(prev) {
+            *z = 2.0 * *z - p;
+        }
+    }
     let mut out = vec![T::ZERO; dw.len()];
     for k in 0..s.k {
         for f in 0..s.ci {
@@ -387,63 +418,103 @@ fn weights_from_k_major<T: Real>(dw: &[f64], s: &ChebShape) -> Vec<T> {
 multiversion!(
     #[allow(clippy::too_many_arguments)]
     fn sweep_chunk<T>(
-        a: &Csr,
-        terms: &[Vec<T>],
-        g: &[T],
-        wt: &[T],
-        s: &ChebShape,
-        chunk: usize,
+        ctx: &Ctx<'_, T>,
+        at: &Csr,
+        g: Blocks<'_, T>,
+        w1: &[T],
+        job: (usize, Option<usize>, bool),
         dest: ChunkOut<'_, T>,
-        lanes: &mut [[T; LANES]],
         staging: &mut Staging<T>,
-    ) => sweep_chunk_body
+    ) -> Vec<f64> => sweep_chunk_body
 );
 
-/// The first backward sweep over one chunk: dW partial sums into `lanes` (k-major, if it is not
-/// empty) and g W_{K−1}ᵀ into `dest` (unless discarded).
+/// The first backward sweep over one chunk (`job`: chunk index, the length of the partial sums
+/// if any are wanted, whether dW is): returns the chunk's dW (k-major) and db partial sums,
+/// writes b_{K−2} (or dx) to `dest`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn sweep_chunk_body<T: Real, M: Madd>(
-    a: &Csr,
-    terms: &[Vec<T>],
-    g: &[T],
-    wt: &[T],
-    s: &ChebShape,
-    chunk: usize,
+    ctx: &Ctx<'_, T>,
+    at: &Csr,
+    g: Blocks<'_, T>,
+    w1: &[T],
+    (chunk, sums, need_w): (usize, Option<usize>, bool),
     mut dest: ChunkOut<'_, T>,
-    lanes: &mut [[T; LANES]],
     staging: &mut Staging<T>,
-) {
-    let (batch, ci, co) = (s.batch, s.ci, s.co);
+) -> Vec<f64> {
+    let s = ctx.s;
+    let (k, ci, co, batch) = (s.k, s.ci, s.co, s.batch);
+    let (n, n_out) = (ci * batch, co * batch);
     let (i0, cnt) = chunk_span(chunk, s.v);
-    let [g_blocks, last, h] = staging.get([cnt * co * batch, ci * batch, cnt * ci * batch]);
-    load_chunk(g, (batch, s.v, co), (i0, cnt), g_blocks);
-    let need_w = !lanes.is_empty();
-    if need_w {
-        for (li, g_block) in g_blocks.chunks_exact(co * batch).enumerate() {
-            let i = i0 + li;
-            last_term::<T, M>(a, terms, s.k, i, last);
-            for k in 0..s.k {
-                let block = term_block(terms, last, k, s.k, i);
-                for (f, t_f) in block.chunks_exact(batch).enumerate() {
-                    let lanes_kf = &mut lanes[(k * ci + f) * co..][..co];
-                    match co {
-                        9 => dot_lanes::<T, M, 9>(t_f, g_block, batch, lanes_kf),
-                        _ => dot_lanes::<T, M, 0>(t_f, g_block, batch, lanes_kf),
-                    }
+    let h_len = if k >= 2 { cnt * n_out } else { 0 };
+    let [gbuf, xbuf, hbuf, tmp, obuf] = staging.get([cnt * n_out, cnt * n, h_len, n_out, cnt * n]);
+    let gc = g.chunk(i0, cnt, gbuf);
+    // h = Aᵀ g at the chunk's vertices.
+    for (li, h) in hbuf.chunks_exact_mut(n_out).enumerate() {
+        let (cols, vals) = at.row::<T>(i0 + li);
+        g.gather::<M>(cols, vals, tmp, h);
+    }
+    let hc = &*hbuf;
+    let mut partial = Vec::new();
+    if let Some(len) = sums {
+        let mut lanes = vec![[T::ZERO; LANES]; len];
+        let block = ci * co;
+        if need_w {
+            let xc = ctx.x.chunk(i0, cnt, xbuf);
+            let dims = (ci, co, batch);
+            for j in 0..(k - 1).max(1) {
+                let t = ctx.term(j, xc, (i0, cnt));
+                dot_chunk::<T, M>(t, gc, dims, &mut lanes[j * block..][..block]);
+            }
+            if k >= 2 {
+                let t = ctx.term(k - 2, xc, (i0, cnt));
+                dot_chunk::<T, M>(t, hc, dims, &mut lanes[(k - 1) * block..][..block]);
+            }
+        }
+        let db = &mut lanes[k * block..];
+        for gb in gc.chunks_exact(n_out) {
+            for (acc, go) in db.iter_mut().zip(gb.chunks_exact(batch)) {
+                for (b, &v) in go.iter().enumerate() {
+                    acc[b % LANES] += v;
                 }
             }
         }
+        partial = lanes
+            .iter()
+            .map(|l| l.iter().map(|v| v.to_f64()).sum())
+            .collect();
     }
-    if !dest.is_discard() {
-        let wt_last = &wt[(s.k - 1) * co * ci..][..co * ci];
-        for (g_block, h_block) in g_blocks
-            .chunks_exact(co * batch)
-            .zip(h.chunks_exact_mut(ci * batch))
-        {
-            mix_any::<T, M>(g_block, wt_last, ci, batch, h_block, false);
+    if dest.is_discard() {
+        return partial;
+    }
+    let hc = (k >= 2).then_some(hc);
+    match dest.direct() {
+        Some(out) => first_rows::<T, M>(gc, hc, w1, (ci, co, batch), out),
+        None => {
+            first_rows::<T, M>(gc, hc, w1, (ci, co, batch), obuf);
+            dest.store(obuf);
         }
-        dest.store(h);
+    }
+    partial
+}
+
+/// b_{K−2} (or dx) rows of one chunk: g W_{K−2}ᵀ + c h W_{K−1}ᵀ (`w1` stacks both), or g W_0ᵀ.
+#[inline(always)]
+fn first_rows<T: Real, M: Madd>(
+    gc: &[T],
+    hc: Option<&[T]>,
+    w1: &[T],
+    (ci, co, batch): (usize, usize, usize),
+    out: &mut [T],
+) {
+    let (n, n_out) = (ci * batch, co * batch);
+    let d = MixDims { p: ci, batch };
+    for (li, o) in out.chunks_exact_mut(n).enumerate() {
+        let g_i = &gc[li * n_out..][..n_out];
+        match hc {
+            Some(hc) => mix::<T, M>(&[g_i, &hc[li * n_out..][..n_out]], w1, d, None, o),
+            None => mix::<T, M>(&[g_i], w1, d, None, o),
+        }
     }
 }
 
@@ -451,10 +522,10 @@ multiversion!(
     #[allow(clippy::too_many_arguments)]
     fn clenshaw_chunk<T>(
         at: &Csr,
-        g: &[T],
+        g: Blocks<'_, T>,
         wt_k: &[T],
         step: (T, Option<&[T]>),
-        next: &[T],
+        next: Blocks<'_, T>,
         s: &ChebShape,
         chunk: usize,
         dest: ChunkOut<'_, T>,
@@ -462,35 +533,57 @@ multiversion!(
     ) => clenshaw_chunk_body
 );
 
-/// One Clenshaw step over one chunk: out = g W_kᵀ + alpha · L̃ᵀ next − after (`after` absent:
+/// One Clenshaw step over one chunk: out = g W_kᵀ + alpha · Aᵀ next − after (`after` absent:
 /// 0); `next` and `after` channel-major.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn clenshaw_chunk_body<T: Real, M: Madd>(
     at: &Csr,
-    g: &[T],
+    g: Blocks<'_, T>,
     wt_k: &[T],
     (alpha, after): (T, Option<&[T]>),
-    next: &[T],
+    next: Blocks<'_, T>,
     s: &ChebShape,
     chunk: usize,
     mut dest: ChunkOut<'_, T>,
     staging: &mut Staging<T>,
 ) {
     let (batch, ci, co) = (s.batch, s.ci, s.co);
-    let n = ci * batch;
+    let (n, n_out) = (ci * batch, co * batch);
     let (i0, cnt) = chunk_span(chunk, s.v);
-    let [g_blocks, acc, out] = staging.get([cnt * co * batch, n, cnt * n]);
-    load_chunk(g, (batch, s.v, co), (i0, cnt), g_blocks);
-    for (li, (g_block, o)) in g_blocks
-        .chunks_exact(co * batch)
-        .zip(out.chunks_exact_mut(n))
-        .enumerate()
-    {
+    let [gbuf, tmp, acc, obuf] = staging.get([cnt * n_out, n, n, cnt * n]);
+    let gc = g.chunk(i0, cnt, gbuf);
+    let step = (alpha, after, next);
+    match dest.direct() {
+        Some(out) => clenshaw_rows::<T, M>(at, gc, wt_k, step, s, (i0, tmp, acc), out),
+        None => {
+            clenshaw_rows::<T, M>(at, gc, wt_k, step, s, (i0, tmp, acc), obuf);
+            dest.store(obuf);
+        }
+    }
+}
+
+/// The Clenshaw step's rows of one chunk (see [`clenshaw_chunk_body`]).
+#[inline(always)]
+fn clenshaw_rows<T: Real, M: Madd>(
+    at: &Csr,
+    gc: &[T],
+    wt_k: &[T],
+    (alpha, after, next): (T, Option<&[T]>, Blocks<'_, T>),
+    s: &ChebShape,
+    (i0, tmp, acc): (usize, &mut [T], &mut [T]),
+    out: &mut [T],
+) {
+    let (n, n_out) = (s.ci * s.batch, s.co * s.batch);
+    let d = MixDims {
+        p: s.ci,
+        batch: s.batch,
+    };
+    for (li, o) in out.chunks_exact_mut(n).enumerate() {
         let i = i0 + li;
         let (cols, vals) = at.row::<T>(i);
-        gather_row::<T, M>(cols, vals, next, n, acc);
-        mix_any::<T, M>(g_block, wt_k, ci, batch, o, false);
+        next.gather::<M>(cols, vals, tmp, acc);
+        mix::<T, M>(&[&gc[li * n_out..][..n_out]], wt_k, d, None, o);
         for (z, &m) in o.iter_mut().zip(acc.iter()) {
             *z = M::madd(alpha, m, *z);
         }
@@ -498,85 +591,6 @@ fn clenshaw_chunk_body<T: Real, M: Madd>(
             for (z, &p) in o.iter_mut().zip(&after[i * n..][..n]) {
                 *z = *z - p;
             }
-        }
-    }
-    dest.store(out);
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::test_util::{dense_apply, random_matrix, random_vec};
-
-    /// Σ_k T_k(A) x W_k by dense recurrences, W in the authors' layout.
-    fn reference(m: &mesh_hierarchy::CsrMatrix, x: &[f64], w: &[f64], s: &ChebShape) -> Vec<f64> {
-        let mut terms = vec![x.to_vec()];
-        for k in 1..s.k {
-            let ax = dense_apply(m, &terms[k - 1], s.batch, s.ci);
-            let t = if k == 1 {
-                ax
-            } else {
-                ax.iter()
-                    .zip(&terms[k - 2])
-                    .map(|(a, p)| 2.0 * a - p)
-                    .collect()
-            };
-            terms.push(t);
-        }
-        let mut y = vec![0.0; s.batch * s.v * s.co];
-        for r in 0..s.batch * s.v {
-            for o in 0..s.co {
-                for f in 0..s.ci {
-                    for (k, t) in terms.iter().enumerate() {
-                        y[r * s.co + o] += t[r * s.ci + f] * w[(f * s.k + k) * s.co + o];
-                    }
-                }
-            }
-        }
-        y
-    }
-
-    #[test]
-    fn fused_forward_and_adjoint_match_dense_reference() {
-        let v = 11;
-        let m = random_matrix(v, v, 0.35, 7);
-        let (a, at) = (Csr::from_matrix(&m), Csr::from_matrix(&m.transpose()));
-        for (k, ci, co) in [(1, 2, 3), (2, 3, 2), (3, 9, 9), (4, 2, 5), (5, 3, 1)] {
-            let s = ChebShape {
-                batch: 2,
-                v,
-                ci,
-                co,
-                k,
-            };
-            let x = random_vec(2 * v * ci, 11);
-            let w = random_vec(ci * k * co, 12);
-            let (y, stored) = forward(&a, &x, &w, &s);
-            let want = reference(&m, &x, &w, &s);
-            for (p, q) in y.iter().zip(&want) {
-                assert!((p - q).abs() < 1e-12, "K={k} forward");
-            }
-            // Adjoint identity: <g, y(x)> is linear in x and in W, so its gradients are exact.
-            let g = random_vec(2 * v * co, 13);
-            let (dx, dw) = backward(&a, &at, &stored, &w, &g, &s, (true, true));
-            let (dx, dw) = (dx.unwrap(), dw.unwrap());
-            let dot = |y: &[f64]| y.iter().zip(&g).map(|(p, q)| p * q).sum::<f64>();
-            for (idx, &d) in dx.iter().enumerate().step_by(5) {
-                let mut xe = vec![0.0; x.len()];
-                xe[idx] = 1.0;
-                let want = dot(&reference(&m, &xe, &w, &s));
-                assert!((d - want).abs() < 1e-10, "K={k} dx[{idx}] {d} vs {want}");
-            }
-            for (idx, &d) in dw.iter().enumerate() {
-                let mut we = vec![0.0; w.len()];
-                we[idx] = 1.0;
-                let want = dot(&reference(&m, &x, &we, &s));
-                assert!((d - want).abs() < 1e-10, "K={k} dW[{idx}] {d} vs {want}");
-            }
-            let (none_x, only_w) = backward(&a, &at, &stored, &w, &g, &s, (false, true));
-            assert!(none_x.is_none());
-            let only_w = only_w.unwrap();
-            assert!(only_w.iter().zip(&dw).all(|(p, q)| (p - q).abs() < 1e-12));
         }
     }
 }

@@ -1,38 +1,65 @@
-//! The fused Chebyshev convolution as one candle `CustomOp2` on (x `[B, V, C_in]`,
-//! W `[C_in·K, C_out]`): forward and backward run the kernels of `cheb_kernel.rs` on the CPU
-//! storage directly.
+//! The fused Chebyshev convolution as one candle custom op: `CustomOp2` on (x, W), or
+//! `CustomOp3` on (x, W, b) with a bias. Forward and backward run the kernels of
+//! `cheb_kernel.rs` on the CPU storage directly, for x in `[B, V, C_in]` or `[V, B, C_in]`.
 
-use crate::cheb_kernel::{self, ChebShape};
+use crate::cheb_kernel::{self, ChebShape, Need};
 use crate::kernel::{Csr, Real};
-use crate::scratch::Recycled;
+use crate::layout::{Blocks, Io, to_channel_major};
+use crate::scratch::{self, Recycled};
 use crate::spmm::contiguous_span;
 use candle_core::backend::BackendStorage;
-use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Storage, Tensor, WithDType};
+use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Storage, Tensor, WithDType};
 use std::any::Any;
 use std::sync::{Arc, Mutex};
 
-/// The fused op on (x `[B, V, C_in]`, W `[C_in·K, C_out]`). The forward's stored terms
-/// T_0 … T_{K−2} (channel-major) are kept for the backward pass (recomputed if missing).
+/// The fused op. The forward pass keeps its stored terms (and, for `[B, V, C]` input, the
+/// channel-major copy of x) for the backward pass; they are recomputed if missing.
 pub(crate) struct ChebOp {
     a: Arc<Csr>,
     at: Arc<Csr>,
     k: usize,
+    io: Io,
     saved: Mutex<Option<Arc<dyn Any + Send + Sync>>>,
 }
 
+/// What the forward pass leaves for the backward pass: buffers 0 … (x copy first, if any).
+struct Saved<T: Real> {
+    x_copy: bool,
+    bufs: Recycled<T>,
+}
+
+impl<T: Real> Saved<T> {
+    fn terms(&self) -> &[Vec<T>] {
+        &self.bufs.0[usize::from(self.x_copy)..]
+    }
+}
+
+/// Dense slices of the op's arguments.
+struct Args<'a, T> {
+    x: &'a [T],
+    w: &'a [T],
+    b: Option<&'a [T]>,
+}
+
 impl ChebOp {
-    pub(crate) fn new(a: Arc<Csr>, at: Arc<Csr>, k: usize) -> Self {
+    pub(crate) fn new(a: Arc<Csr>, at: Arc<Csr>, k: usize, io: Io) -> Self {
         Self {
             a,
             at,
             k,
+            io,
             saved: Mutex::new(None),
         }
     }
 
     fn shape(&self, x_dims: &[usize], w_dims: &[usize]) -> candle_core::Result<ChebShape> {
-        let (&[batch, v, ci], &[rows, co]) = (x_dims, w_dims) else {
+        let (&[d0, d1, d2], &[rows, co]) = (x_dims, w_dims) else {
             candle_core::bail!("cheb-conv: shapes {x_dims:?} and {w_dims:?}");
+        };
+        let (batch, v, ci) = match self.io {
+            Io::BatchMajor => (d0, d1, d2),
+            Io::VertexBatch => (d1, d0, d2),
+            Io::VertexChannel => (d2, d0, d1),
         };
         if v != self.a.rows || rows != ci * self.k {
             candle_core::bail!(
@@ -50,30 +77,116 @@ impl ChebOp {
         })
     }
 
-    fn run<T: Real>(&self, x: &[T], w: &[T], s: &ChebShape) -> Vec<T> {
-        let (y, stored) = cheb_kernel::forward(&self.a, x, w, s);
-        if let Ok(mut saved) = self.saved.lock() {
-            *saved = Some(Arc::new(Recycled(stored)));
+    fn out_shape(&self, s: &ChebShape) -> Shape {
+        match self.io {
+            Io::BatchMajor => Shape::from((s.batch, s.v, s.co)),
+            Io::VertexBatch => Shape::from((s.v, s.batch, s.co)),
+            Io::VertexChannel => Shape::from((s.v, s.co, s.batch)),
+        }
+    }
+
+    /// x as blocks: the caller's array, or (`[B, V, C]`) a channel-major copy made here.
+    fn x_blocks<'a, T: Real>(
+        &self,
+        x: &'a [T],
+        copy: Option<&'a Vec<T>>,
+        s: &ChebShape,
+    ) -> Blocks<'a, T> {
+        match copy {
+            Some(c) => Blocks::channel_major(c, s.batch, s.ci),
+            None => Blocks::new(x, self.io, s.batch, s.ci),
+        }
+    }
+
+    fn saved_state<T: Real>(&self, x: &[T], s: &ChebShape) -> Saved<T> {
+        let mut bufs = Vec::new();
+        let x_copy = self.io == Io::BatchMajor;
+        if x_copy {
+            bufs.push(to_channel_major(x, self.io, (s.batch, s.v, s.ci)));
+        }
+        let terms = cheb_kernel::stored_terms(&self.a, self.x_blocks(x, bufs.first(), s), s);
+        bufs.extend(terms);
+        Saved {
+            x_copy,
+            bufs: Recycled(bufs),
+        }
+    }
+
+    fn run<T: Real>(&self, args: Args<'_, T>, s: &ChebShape) -> Vec<T> {
+        let x_copy = (self.io == Io::BatchMajor)
+            .then(|| to_channel_major(args.x, self.io, (s.batch, s.v, s.ci)));
+        let xb = self.x_blocks(args.x, x_copy.as_ref(), s);
+        let (y, terms) = cheb_kernel::forward(&self.a, xb, args.w, args.b, s, self.io);
+        let mut bufs: Vec<Vec<T>> = x_copy.into_iter().collect();
+        let saved = Saved {
+            x_copy: !bufs.is_empty(),
+            bufs: Recycled({
+                bufs.extend(terms);
+                bufs
+            }),
+        };
+        if let Ok(mut slot) = self.saved.lock() {
+            *slot = Some(Arc::new(saved));
         }
         y
     }
 
-    /// The stored terms of the forward pass, or recomputed from x.
-    fn stored<T: Real>(&self, x: &[T], s: &ChebShape) -> Arc<Recycled<T>> {
+    fn fwd(
+        &self,
+        (xs, xl): (&CpuStorage, &Layout),
+        (ws, wl): (&CpuStorage, &Layout),
+        bias: Option<(&CpuStorage, &Layout)>,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let s = self.shape(xl.dims(), wl.dims())?;
+        let (xa, xb) = contiguous_span("cheb-conv", xl)?;
+        let (wa, wb) = contiguous_span("cheb-conv", wl)?;
+        let b_span = match bias {
+            Some((_, bl)) if bl.dims() == [s.co] => Some(contiguous_span("cheb-conv", bl)?),
+            Some((_, bl)) => candle_core::bail!("cheb-conv: bias of shape {:?}", bl.dims()),
+            None => None,
+        };
+        let out = self.out_shape(&s);
+        macro_rules! run {
+            ($variant:ident, $x:expr, $w:expr) => {{
+                let b = match (bias, b_span) {
+                    (Some((CpuStorage::$variant(b), _)), Some((lo, hi))) => Some(&b[lo..hi]),
+                    (None, _) => None,
+                    _ => candle_core::bail!("cheb-conv: the bias has another dtype"),
+                };
+                let args = Args {
+                    x: &$x[xa..xb],
+                    w: &$w[wa..wb],
+                    b,
+                };
+                Ok((CpuStorage::$variant(self.run(args, &s)), out))
+            }};
+        }
+        match (xs, ws) {
+            (CpuStorage::F32(x), CpuStorage::F32(w)) => run!(F32, x, w),
+            (CpuStorage::F64(x), CpuStorage::F64(w)) => run!(F64, x, w),
+            _ => candle_core::bail!(
+                "cheb-conv: dtypes {:?} and {:?}; expected both f32 or both f64",
+                xs.dtype(),
+                ws.dtype()
+            ),
+        }
+    }
+
+    /// The stored state of the forward pass, or recomputed from x.
+    fn stored<T: Real>(&self, x: &[T], s: &ChebShape) -> Arc<Saved<T>> {
         let saved = self.saved.lock().ok().and_then(|s| s.clone());
-        match saved.and_then(|s| s.downcast::<Recycled<T>>().ok()) {
+        match saved.and_then(|s| s.downcast::<Saved<T>>().ok()) {
             Some(stored) => stored,
-            None => Arc::new(Recycled(cheb_kernel::stored_terms(&self.a, x, s))),
+            None => Arc::new(self.saved_state(x, s)),
         }
     }
 
     fn backward<T: Real + WithDType>(
         &self,
-        x: &Tensor,
-        w: &Tensor,
-        g: &Tensor,
-        need: (bool, bool),
-    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        (x, w, g): (&Tensor, &Tensor, &Tensor),
+        bias: Option<&Tensor>,
+        need: Need,
+    ) -> candle_core::Result<[Option<Tensor>; 3]> {
         let (x_store, x_layout) = x.storage_and_layout();
         let (w_store, w_layout) = w.storage_and_layout();
         let (g_store, g_layout) = g.storage_and_layout();
@@ -83,18 +196,67 @@ impl ChebOp {
             cpu_slice::<T>(&w_store, w_layout)?,
             cpu_slice::<T>(&g_store, g_layout)?,
         );
-        if gs.len() != s.batch * s.v * s.co {
+        if g_layout.shape() != &self.out_shape(&s) {
             candle_core::bail!("cheb-conv: gradient of shape {:?}", g_layout.dims());
         }
-        let stored = self.stored(xs, &s);
-        let (dx, dw) = cheb_kernel::backward(&self.a, &self.at, &stored.0, ws, gs, &s, need);
-        let dx = dx
+        let saved = self.stored(xs, &s);
+        let xb = self.x_blocks(xs, saved.x_copy.then(|| &saved.bufs.0[0]), &s);
+        let g_copy = (self.io == Io::BatchMajor)
+            .then(|| to_channel_major(gs, self.io, (s.batch, s.v, s.co)));
+        let gb = match &g_copy {
+            Some(c) => Blocks::channel_major(c, s.batch, s.co),
+            None => Blocks::new(gs, self.io, s.batch, s.co),
+        };
+        let grads = cheb_kernel::backward(
+            &self.a,
+            &self.at,
+            xb,
+            saved.terms(),
+            ws,
+            gb,
+            &s,
+            self.io,
+            need,
+        );
+        if let Some(c) = g_copy {
+            scratch::give(c);
+        }
+        let dx = grads
+            .dx
             .map(|d| Tensor::from_vec(d, x_layout.dims(), x.device()))
             .transpose()?;
-        let dw = dw
+        let dw = grads
+            .dw
             .map(|d| Tensor::from_vec(d, w_layout.dims(), w.device()))
             .transpose()?;
-        Ok((dx, dw))
+        let db = match (grads.db, bias) {
+            (Some(d), Some(b)) => Some(Tensor::from_vec(d, b.dims(), b.device())?),
+            _ => None,
+        };
+        Ok([dx, dw, db])
+    }
+
+    fn bwd_any(
+        &self,
+        x: &Tensor,
+        w: &Tensor,
+        bias: Option<&Tensor>,
+        grad: &Tensor,
+    ) -> candle_core::Result<[Option<Tensor>; 3]> {
+        // Only what someone asked for: no dx for a network's input data.
+        let need = Need {
+            x: x.track_op(),
+            w: w.track_op(),
+            b: bias.is_some_and(|b| b.track_op()),
+        };
+        let (x, w) = (x.contiguous()?, w.contiguous()?);
+        // Gradients can arrive strided (zero strides from a broadcast): make them dense.
+        let g = grad.contiguous()?;
+        match x.dtype() {
+            candle_core::DType::F32 => self.backward::<f32>((&x, &w, &g), bias, need),
+            candle_core::DType::F64 => self.backward::<f64>((&x, &w, &g), bias, need),
+            other => candle_core::bail!("cheb-conv: dtype {other:?} not supported"),
+        }
     }
 }
 
@@ -122,25 +284,7 @@ impl CustomOp2 for ChebOp {
         ws: &CpuStorage,
         wl: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let s = self.shape(xl.dims(), wl.dims())?;
-        let (xa, xb) = contiguous_span("cheb-conv", xl)?;
-        let (wa, wb) = contiguous_span("cheb-conv", wl)?;
-        let out_shape = Shape::from((s.batch, s.v, s.co));
-        match (xs, ws) {
-            (CpuStorage::F32(x), CpuStorage::F32(w)) => Ok((
-                CpuStorage::F32(self.run(&x[xa..xb], &w[wa..wb], &s)),
-                out_shape,
-            )),
-            (CpuStorage::F64(x), CpuStorage::F64(w)) => Ok((
-                CpuStorage::F64(self.run(&x[xa..xb], &w[wa..wb], &s)),
-                out_shape,
-            )),
-            _ => candle_core::bail!(
-                "cheb-conv: dtypes {:?} and {:?}; expected both f32 or both f64",
-                xs.dtype(),
-                ws.dtype()
-            ),
-        }
+        self.fwd((xs, xl), (ws, wl), None)
     }
 
     fn bwd(
@@ -150,15 +294,38 @@ impl CustomOp2 for ChebOp {
         _y: &Tensor,
         grad: &Tensor,
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-        // Only what someone asked for: no dx for a network's input data.
-        let need = (x.track_op(), w.track_op());
-        let (x, w) = (x.contiguous()?, w.contiguous()?);
-        // Gradients can arrive strided (zero strides from a broadcast): make them dense.
-        let g = grad.contiguous()?;
-        match x.dtype() {
-            candle_core::DType::F32 => self.backward::<f32>(&x, &w, &g, need),
-            candle_core::DType::F64 => self.backward::<f64>(&x, &w, &g, need),
-            other => candle_core::bail!("cheb-conv: dtype {other:?} not supported"),
-        }
+        let [dx, dw, _] = self.bwd_any(x, w, None, grad)?;
+        Ok((dx, dw))
+    }
+}
+
+impl CustomOp3 for ChebOp {
+    fn name(&self) -> &'static str {
+        "cheb-conv-bias"
+    }
+
+    fn cpu_fwd(
+        &self,
+        xs: &CpuStorage,
+        xl: &Layout,
+        ws: &CpuStorage,
+        wl: &Layout,
+        bs: &CpuStorage,
+        bl: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        self.fwd((xs, xl), (ws, wl), Some((bs, bl)))
+    }
+
+    fn bwd(
+        &self,
+        x: &Tensor,
+        w: &Tensor,
+        b: &Tensor,
+        _y: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let b = b.contiguous()?;
+        let [dx, dw, db] = self.bwd_any(x, w, Some(&b), grad)?;
+        Ok((dx, dw, db))
     }
 }

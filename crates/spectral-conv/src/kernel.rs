@@ -16,6 +16,7 @@
 //! SIMD: the hot per-chunk functions are compiled twice ([`multiversion`]): for AVX2 + FMA, used
 //! when the CPU has them, and for the baseline target.
 
+use crate::layout::{ChunkOut, Io, chunk_outs, to_channel_major};
 use mesh_hierarchy::CsrMatrix;
 use rayon::prelude::*;
 use std::ops::{Add, AddAssign, Mul, Sub};
@@ -54,6 +55,30 @@ pub(crate) trait Real:
     fn scatter_runs(src: &[Self], runs: &mut [&mut [Self]]) {
         crate::transpose::scatter_runs_scalar(src, runs);
     }
+    /// dst[c·R + r] = src[r·C + c] for an R × C block (see `transpose.rs`).
+    fn transpose_block(src: &[Self], rows: usize, cols: usize, dst: &mut [Self]) {
+        crate::transpose::transpose_block_scalar(src, rows, cols, dst);
+    }
+    /// A hand-vectorised [`crate::mix::mix`], if there is one for this type and CPU (false:
+    /// nothing was done).
+    fn mix_simd(
+        _inps: &[&[Self]],
+        _m: &[Self],
+        _d: crate::mix::MixDims,
+        _bias: Option<&[Self]>,
+        _out: &mut [Self],
+    ) -> bool {
+        false
+    }
+    /// A hand-vectorised [`crate::mix::dot_chunk`], if there is one (false: nothing was done).
+    fn dot_simd(
+        _t: &[Self],
+        _g: &[Self],
+        _dims: (usize, usize, usize),
+        _lanes: &mut [[Self; crate::mix::LANES]],
+    ) -> bool {
+        false
+    }
 }
 
 impl Real for f32 {
@@ -82,6 +107,26 @@ impl Real for f32 {
     }
     fn scatter_runs(src: &[Self], runs: &mut [&mut [Self]]) {
         crate::transpose::scatter_runs_f32(src, runs);
+    }
+    fn transpose_block(src: &[Self], rows: usize, cols: usize, dst: &mut [Self]) {
+        crate::transpose::transpose_block_f32(src, rows, cols, dst);
+    }
+    fn mix_simd(
+        inps: &[&[Self]],
+        m: &[Self],
+        d: crate::mix::MixDims,
+        bias: Option<&[Self]>,
+        out: &mut [Self],
+    ) -> bool {
+        crate::simd::mix_f32(inps, m, d, bias, out)
+    }
+    fn dot_simd(
+        t: &[Self],
+        g: &[Self],
+        dims: (usize, usize, usize),
+        lanes: &mut [[Self; crate::mix::LANES]],
+    ) -> bool {
+        crate::simd::dot_chunk_f32(t, g, dims, lanes)
     }
 }
 
@@ -137,13 +182,18 @@ impl Madd for Fused {
 /// `$body` must be `#[inline(always)]` so that it is compiled inside each variant.
 macro_rules! multiversion {
     ($(#[$meta:meta])* fn $name:ident<T>($($arg:ident: $ty:ty),* $(,)?) => $body:ident) => {
+        $crate::kernel::multiversion!(
+            $(#[$meta])* fn $name<T>($($arg: $ty),*) -> () => $body
+        );
+    };
+    ($(#[$meta:meta])* fn $name:ident<T>($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty => $body:ident) => {
         $(#[$meta])*
-        fn $name<T: $crate::kernel::Real>($($arg: $ty),*) {
+        fn $name<T: $crate::kernel::Real>($($arg: $ty),*) -> $ret {
             #[cfg(target_arch = "x86_64")]
             {
                 $(#[$meta])*
                 #[target_feature(enable = "avx2,fma")]
-                fn fast<T: $crate::kernel::Real>($($arg: $ty),*) {
+                fn fast<T: $crate::kernel::Real>($($arg: $ty),*) -> $ret {
                     $body::<T, $crate::kernel::Fused>($($arg),*)
                 }
                 if std::arch::is_x86_feature_detected!("avx2")
@@ -159,6 +209,10 @@ macro_rules! multiversion {
     };
 }
 pub(crate) use multiversion;
+
+/// Held by tests that set [`FORCE_BASELINE`] or need every call to take the same variant.
+#[cfg(test)]
+pub(crate) static BASELINE_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Tests set this to run the baseline variants on a CPU that has AVX2 + FMA.
 #[cfg(test)]
@@ -216,25 +270,30 @@ impl Csr {
 /// Per-task staging buffers: allocated once per rayon job (`for_each_init`, `fold`) rather than
 /// per chunk. Contents are left from the previous chunk; every kernel overwrites what it uses.
 pub(crate) struct Staging<T> {
-    bufs: [Vec<T>; 3],
+    bufs: Vec<Vec<T>>,
 }
 
 impl<T: Real> Staging<T> {
     pub fn new() -> Self {
-        Self {
-            bufs: [Vec::new(), Vec::new(), Vec::new()],
-        }
+        Self { bufs: Vec::new() }
     }
 
-    /// Three buffers of the given lengths.
-    pub fn get(&mut self, lens: [usize; 3]) -> [&mut [T]; 3] {
-        let [a, b, c] = &mut self.bufs;
-        for (v, &n) in [&mut *a, &mut *b, &mut *c].into_iter().zip(&lens) {
-            if v.len() < n {
-                v.resize(n, T::ZERO);
-            }
+    /// `N` buffers of the given lengths.
+    pub fn get<const N: usize>(&mut self, lens: [usize; N]) -> [&mut [T]; N] {
+        if self.bufs.len() < N {
+            self.bufs.resize_with(N, Vec::new);
         }
-        [&mut a[..lens[0]], &mut b[..lens[1]], &mut c[..lens[2]]]
+        let mut bufs = self.bufs.iter_mut();
+        std::array::from_fn(|k| match bufs.next() {
+            Some(v) => {
+                if v.len() < lens[k] {
+                    v.resize(lens[k], T::ZERO);
+                }
+                &mut v[..lens[k]]
+            }
+            // Unreachable: `bufs` was just given at least N buffers.
+            None => &mut [],
+        })
     }
 }
 
@@ -345,72 +404,6 @@ pub(crate) fn load_chunk<T: Real>(
     T::gather_runs(&runs, &mut buf[..cnt * c * batch]);
 }
 
-/// `[B, V, c]` → `[V, c, B]`, in a recycled buffer (see `scratch.rs`).
-pub(crate) fn to_channel_major<T: Real>(x: &[T], batch: usize, v: usize, c: usize) -> Vec<T> {
-    let n = batch * c;
-    let mut out = crate::scratch::take(v * n);
-    if n == 0 {
-        return out;
-    }
-    out.par_chunks_mut(CHUNK_ROWS * n)
-        .enumerate()
-        .for_each(|(chunk, o)| load_chunk(x, (batch, v, c), chunk_span(chunk, v), o));
-    out
-}
-
-/// Where one chunk of vertices writes its results.
-pub(crate) enum ChunkOut<'a, T> {
-    /// Into a channel-major `[V, c, B]` array: the chunk's contiguous part.
-    ChannelMajor(&'a mut [T]),
-    /// Into a `[B, V, c]` array: the chunk's run of every batch slice.
-    BatchMajor(Vec<&'a mut [T]>),
-    /// Nowhere (the result is not wanted).
-    Discard,
-}
-
-impl<T: Real> ChunkOut<'_, T> {
-    pub fn is_discard(&self) -> bool {
-        matches!(self, ChunkOut::Discard)
-    }
-
-    /// Stores the chunk's results, given as channel-major blocks `[cnt, c, B]`.
-    #[inline(always)]
-    pub fn store(&mut self, blocks: &[T]) {
-        match self {
-            ChunkOut::ChannelMajor(out) => out.copy_from_slice(&blocks[..out.len()]),
-            ChunkOut::BatchMajor(runs) => T::scatter_runs(blocks, runs),
-            ChunkOut::Discard => {}
-        }
-    }
-}
-
-/// Splits an output of `v` vertices × `c` channels × `batch` into one destination per chunk of
-/// vertices, so chunks can be written in parallel whatever the layout.
-pub(crate) fn chunk_outs<T>(
-    out: &mut [T],
-    channel_major: bool,
-    (batch, v, c): (usize, usize, usize),
-) -> Vec<ChunkOut<'_, T>> {
-    let n_chunks = v.div_ceil(CHUNK_ROWS);
-    if batch * c == 0 {
-        return (0..n_chunks).map(|_| ChunkOut::Discard).collect();
-    }
-    if channel_major {
-        return out
-            .chunks_mut(CHUNK_ROWS * batch * c)
-            .map(ChunkOut::ChannelMajor)
-            .collect();
-    }
-    let mut per_chunk: Vec<Vec<&mut [T]>> =
-        (0..n_chunks).map(|_| Vec::with_capacity(batch)).collect();
-    for slab in out.chunks_mut(v * c) {
-        for (k, part) in slab.chunks_mut(CHUNK_ROWS * c).enumerate() {
-            per_chunk[k].push(part);
-        }
-    }
-    per_chunk.into_iter().map(ChunkOut::BatchMajor).collect()
-}
-
 /// y = A x for x `[B, A.cols, c]`, returning `[B, A.rows, c]` (through a channel-major copy of
 /// x when B > 1; for B = 1 the layouts coincide and the rows are gathered directly).
 pub(crate) fn spmm_batch_major<T: Real>(a: &Csr, x: &[T], batch: usize, c: usize) -> Vec<T> {
@@ -419,8 +412,8 @@ pub(crate) fn spmm_batch_major<T: Real>(a: &Csr, x: &[T], batch: usize, c: usize
         spmm_axpby(a, T::from_f64(1.0), x, T::ZERO, None, &mut y, c);
         return y;
     }
-    let xcm = to_channel_major(x, batch, a.cols, c);
-    chunk_outs(&mut y, false, (batch, a.rows, c))
+    let xcm = to_channel_major(x, Io::BatchMajor, (batch, a.cols, c));
+    chunk_outs(&mut y, Io::BatchMajor, (batch, a.rows, c))
         .into_par_iter()
         .enumerate()
         .for_each_init(Staging::new, |staging, (chunk, dest)| {
@@ -563,7 +556,7 @@ mod tests {
                 "B={batch}"
             );
             // x[b, i, o] sits at cm[i, o, b].
-            let cm = to_channel_major(&x, batch, 270, c);
+            let cm = to_channel_major(&x, Io::BatchMajor, (batch, 270, c));
             for (b, i, o) in [(0, 0, 0), (batch - 1, 7, c - 1), (batch / 2, 269, c / 2)] {
                 assert_eq!(cm[(i * c + o) * batch + b], x[(b * 270 + i) * c + o]);
             }

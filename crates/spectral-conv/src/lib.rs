@@ -13,6 +13,13 @@
 //! runs on any device; the kernel path switches to it by itself off the CPU, so a CUDA build only
 //! needs this crate's `cuda` feature. Bad arguments are [`ConvError`]s.
 //!
+//! Layouts: every layer takes `[B, V, C]` (`forward`, `apply`) and also the vertex-major
+//! `[V, B, C]` (`forward_vertex_major`, `apply_vertex_major`), in which one vertex's values for
+//! the whole batch are contiguous. A network that keeps its activations `[V, B, C]` from the
+//! first layer to the last never transposes (the `[B, V, C]` entry points transpose internally
+//! on every call); channel stays the last dimension, so element-wise layers and batch norm over
+//! channels are unchanged. Both give the same results.
+//!
 //! Speed notes: use mimalloc as the global allocator (every op allocates ~50 MB tensors), and
 //! number the template's vertices with [`locality_order`] once, before building the hierarchy,
 //! if its order has little locality (see `docs/benchmarks.md`). Large intermediates are
@@ -43,17 +50,24 @@
 
 mod cheb;
 mod cheb_kernel;
+#[cfg(test)]
+mod cheb_kernel_tests;
 mod cheb_op;
 mod error;
 mod kernel;
+mod layout;
+mod mix;
 mod order;
 mod pool;
 mod scratch;
+mod simd;
 mod spatial;
 mod spmm;
 #[cfg(test)]
 mod test_util;
 mod transpose;
+#[cfg(test)]
+mod vertex_major_tests;
 
 pub use cheb::{ChebConfig, ChebConv};
 pub use error::{ConvError, Result};

@@ -39,6 +39,12 @@ macro_rules! sparse_layer {
                 self.0.apply(x)
             }
 
+            /// `[cols, B, C]` (or `[cols, C]`) → `[rows, B, C]` (or `[rows, C]`): the vertex-major
+            /// layout (see [`SparseOp::apply_vertex_major`]).
+            pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+                self.0.apply_vertex_major(x)
+            }
+
             /// The underlying sparse product.
             pub fn op(&self) -> &SparseOp {
                 &self.0
@@ -186,6 +192,27 @@ impl MaxPool {
             self.fallback(&x3)?
         };
         Ok(if squeeze { y.squeeze(0)? } else { y })
+    }
+
+    /// `[fine, B, C]` (or `[fine, C]`) → `[coarse, B, C]` (or `[coarse, C]`): the vertex-major
+    /// layout. Per vertex and per (batch, channel) entry, the same selection as [`Self::forward`].
+    pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+        const OP: &str = "MaxPool::forward_vertex_major";
+        if !matches!(x.rank(), 2 | 3) || x.dim(0)? == 0 {
+            return Err(ConvError::input(
+                OP,
+                format!(
+                    "input of shape {:?}; expected [V, B, C] or [V, C]",
+                    x.dims()
+                ),
+            ));
+        }
+        // One batch whose rows are whole vertices: the [B, V, C] op with B = 1, C = B·C.
+        let v = x.dim(0)?;
+        let y = self.forward_with(&x.reshape((1, v, x.elem_count() / v))?, self.backend)?;
+        let mut dims = x.dims().to_vec();
+        dims[0] = self.pattern.rows;
+        Ok(y.reshape(dims)?)
     }
 
     /// candle ops only: gather the padded clusters `[B, P, width, C]`, take the arg-max and the

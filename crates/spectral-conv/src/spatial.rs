@@ -160,6 +160,44 @@ impl SpatialConv {
         self.bias.as_ref()
     }
 
+    /// The neighbour-mean operator.
+    pub fn neighbour_mean(&self) -> &SparseOp {
+        &self.neighbour_mean
+    }
+
+    /// y `[V, B, C_out]` from x `[V, B, C_in]` (or `[V, C_in]` → `[V, C_out]`): the vertex-major
+    /// layout; channel last, so both products are one matmul over the V·B rows.
+    pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+        const OP: &str = "SpatialConv::forward_vertex_major";
+        let (_, flat) = self.neighbour_mean.vertex_major_rows(OP, x)?;
+        let (w_in, c_out) = self.w_self.dims2()?;
+        let c_in = x.dims().last().copied().unwrap_or(0);
+        if c_in != w_in || x.dtype() != self.w_self.dtype() {
+            return Err(ConvError::input(
+                OP,
+                format!(
+                    "input {:?} of {:?}; the layer expects {w_in} channels of {:?}",
+                    x.dims(),
+                    x.dtype(),
+                    self.w_self.dtype()
+                ),
+            ));
+        }
+        let rows = flat.elem_count() / c_in;
+        let mean = self.neighbour_mean.apply(&flat)?;
+        let flat2 = |t: &Tensor| t.reshape((rows, c_in));
+        let y = (flat2(&flat)?.matmul(&self.w_self)? + flat2(&mean)?.matmul(&self.w_nb)?)?;
+        let y = match &self.bias {
+            Some(b) => y.broadcast_add(b)?,
+            None => y,
+        };
+        let mut dims = x.dims().to_vec();
+        if let Some(last) = dims.last_mut() {
+            *last = c_out;
+        }
+        Ok(y.reshape(dims)?)
+    }
+
     /// y `[B, V, C_out]` from x `[B, V, C_in]` (or `[V, C_in]` → `[V, C_out]`).
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         const OP: &str = "SpatialConv::forward";

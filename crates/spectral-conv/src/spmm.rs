@@ -160,6 +160,44 @@ impl SparseOp {
         Ok(if squeeze { y.squeeze(0)? } else { y })
     }
 
+    /// y = A x in the vertex-major layout: x `[cols, B, C]` (or `[cols, C]`) → `[rows, B, C]`
+    /// (or `[rows, C]`). Each vertex's B·C values are one contiguous row, so the kernel gathers
+    /// whole rows without any transpose.
+    pub fn apply_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+        self.apply_vertex_major_with(x, self.backend)
+    }
+
+    /// [`Self::apply_vertex_major`] with an explicit backend.
+    pub fn apply_vertex_major_with(&self, x: &Tensor, backend: Backend) -> Result<Tensor> {
+        let (rows, flat) = self.vertex_major_rows("SparseOp::apply_vertex_major", x)?;
+        let y = self.apply_with(&flat, backend)?;
+        let mut dims = x.dims().to_vec();
+        dims[0] = rows;
+        Ok(y.reshape(dims)?)
+    }
+
+    /// Checks a vertex-major x (`[cols, B, C]` or `[cols, C]`) and returns it as one batch of
+    /// rows `[1, cols, B·C]`, with the output's vertex count.
+    pub(crate) fn vertex_major_rows(
+        &self,
+        op: &'static str,
+        x: &Tensor,
+    ) -> Result<(usize, Tensor)> {
+        if !matches!(x.rank(), 2 | 3) {
+            return Err(ConvError::input(
+                op,
+                format!(
+                    "input of shape {:?}; expected [V, B, C] or [V, C]",
+                    x.dims()
+                ),
+            ));
+        }
+        let v = x.dim(0)?;
+        let row = x.elem_count() / v.max(1);
+        let (flat, _) = self.check_input(op, &x.reshape((1, v, row))?)?;
+        Ok((self.rows(), flat))
+    }
+
     /// Checks x against A and returns it as rank 3 (and whether a batch axis was added).
     pub(crate) fn check_input(&self, op: &'static str, x: &Tensor) -> Result<(Tensor, bool)> {
         let (x3, squeeze) = match x.rank() {

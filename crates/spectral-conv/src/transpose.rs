@@ -24,6 +24,27 @@ pub(crate) fn scatter_runs_scalar<T: Copy>(src: &[T], runs: &mut [&mut [T]]) {
     }
 }
 
+/// dst[c·R + r] = src[r·C + c]: an R × C row-major block into its C × R transpose (one vertex's
+/// `[B, C]` block of a `[V, B, C]` array to the kernels' `[C, B]`, and back).
+pub(crate) fn transpose_block_scalar<T: Copy>(src: &[T], rows: usize, cols: usize, dst: &mut [T]) {
+    for (r, row) in src[..rows * cols].chunks_exact(cols).enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            dst[c * rows + r] = v;
+        }
+    }
+}
+
+/// [`transpose_block_scalar`] with AVX 8×8 tiles where the CPU has AVX2.
+pub(crate) fn transpose_block_f32(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && !crate::kernel::baseline_forced() {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        unsafe { avx::transpose_block(src, rows, cols, dst) };
+        return;
+    }
+    transpose_block_scalar(src, rows, cols, dst);
+}
+
 /// The f32 versions: AVX 8×8 tiles where the CPU has AVX2, the scalar loops elsewhere and for
 /// the edges.
 pub(crate) fn gather_runs_f32(runs: &[&[f32]], dst: &mut [f32]) {
@@ -122,6 +143,27 @@ mod avx {
     }
 
     #[target_feature(enable = "avx2")]
+    pub(super) fn transpose_block(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+        let (r_full, c_full) = (rows - rows % 8, cols - cols % 8);
+        let (src, dst) = (&src[..rows * cols], &mut dst[..rows * cols]);
+        for r0 in (0..r_full).step_by(8) {
+            for c0 in (0..c_full).step_by(8) {
+                let tile = std::array::from_fn(|l| load(&src[(r0 + l) * cols + c0..]));
+                for (c, v) in transpose8(tile).into_iter().enumerate() {
+                    store(&mut dst[(c0 + c) * rows + r0..], v);
+                }
+            }
+        }
+        // Edges: the last columns of the tiled rows, then every column of the last rows.
+        for r in 0..rows {
+            let from = if r < r_full { c_full } else { 0 };
+            for c in from..cols {
+                dst[c * rows + r] = src[r * cols + c];
+            }
+        }
+    }
+
+    #[target_feature(enable = "avx2")]
     pub(super) fn scatter_runs(src: &[f32], runs: &mut [&mut [f32]]) {
         let batch = runs.len();
         let s_n = runs.first().map_or(0, |r| r.len());
@@ -167,6 +209,28 @@ mod tests {
             scatter_runs_scalar(&a, &mut runs_d);
             assert_eq!(c, d, "scatter B={batch} S={s_n}");
             assert_eq!(c, data);
+        }
+    }
+
+    #[test]
+    fn block_transposes_agree_and_round_trip() {
+        for (rows, cols) in [
+            (32usize, 9usize),
+            (9, 32),
+            (13, 21),
+            (8, 8),
+            (3, 5),
+            (17, 1),
+        ] {
+            let data: Vec<f32> = (0..rows * cols).map(|i| i as f32).collect();
+            let (mut a, mut b) = (vec![0.0; rows * cols], vec![0.0; rows * cols]);
+            transpose_block_f32(&data, rows, cols, &mut a);
+            transpose_block_scalar(&data, rows, cols, &mut b);
+            assert_eq!(a, b, "{rows}x{cols}");
+            assert_eq!(a[(cols - 1) * rows], data[cols - 1]);
+            let mut back = vec![0.0; rows * cols];
+            transpose_block_f32(&a, cols, rows, &mut back);
+            assert_eq!(back, data);
         }
     }
 }
