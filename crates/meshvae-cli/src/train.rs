@@ -184,6 +184,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         progress: !args.quiet,
         checkpoint_seconds: args.checkpoint_seconds,
         device: Device::Cpu,
+        ..TrainOptions::default()
     };
     let summary = meshvae::train(&request, &options, |_| {})?;
     println!(

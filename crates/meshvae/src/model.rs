@@ -281,7 +281,9 @@ impl MeshVae {
     /// μ and σ `[B, latent]` of features x `[B, V, 9]`.
     pub fn encode(&self, x: &Tensor, mode: Mode) -> Result<Encoded> {
         self.check_input("MeshVae::encode", x)?;
-        let mut h = x.clone();
+        let batch = x.dim(0)?;
+        // Vertex-major inside the network: see `spectral_conv`'s layouts.
+        let mut h = x.transpose(0, 1)?.contiguous()?;
         let (mut level, mut blocks) = (0, self.enc.iter());
         for layer in self.config.structure.layers() {
             match layer {
@@ -295,8 +297,10 @@ impl MeshVae {
                 }
             }
         }
-        let batch = h.dim(0)?;
-        let flat = h.reshape((batch, self.flat_width()))?;
+        let flat = h
+            .transpose(0, 1)?
+            .contiguous()?
+            .reshape((batch, self.flat_width()))?;
         let mu = dense(&flat, &self.w_mu, Orientation::Plain, &self.sink_mu)?
             .broadcast_add(&self.b_mu)?;
         let s = dense(&flat, &self.w_sigma, Orientation::Plain, &self.sink_sigma)?
@@ -311,7 +315,9 @@ impl MeshVae {
         let coarse = self.vertex_counts[self.vertex_counts.len() - 1];
         let mut h = self
             .decoder_fc(z)?
-            .reshape((batch, coarse, self.config.channels))?;
+            .reshape((batch, coarse, self.config.channels))?
+            .transpose(0, 1)?
+            .contiguous()?;
         let (mut level, mut blocks) = (self.vertex_counts.len() - 1, self.dec.iter());
         for layer in self.config.structure.layers().iter().rev() {
             match layer {
@@ -326,7 +332,7 @@ impl MeshVae {
                 }
             }
         }
-        Ok(h)
+        Ok(h.transpose(0, 1)?.contiguous()?)
     }
 
     /// x̂ and the posterior for features x `[B, V, 9]` and noise ε `[B, latent]`:

@@ -61,6 +61,10 @@ pub struct TrainOptions {
     /// A checkpoint of the paper's network on horse-gallop is ~120 MB, so writing it every
     /// epoch of a 0.5 s epoch would dominate the run; a kill loses at most this much work.
     pub checkpoint_seconds: f64,
+    /// Models with up to this many parameters keep their best weights in memory until the next
+    /// checkpoint; larger ones write them as soon as they improve, so that a copy of a large
+    /// model (~200 MB on a 42k-vertex mesh) does not stay in memory through the next epochs.
+    pub best_in_memory_params: usize,
     pub device: Device,
 }
 
@@ -71,6 +75,7 @@ impl Default for TrainOptions {
             force: false,
             progress: false,
             checkpoint_seconds: 60.0,
+            best_in_memory_params: 16 << 20,
             device: Device::Cpu,
         }
     }
@@ -219,7 +224,14 @@ pub fn train(
         // Without test meshes the best model is the one with the lowest training loss.
         let score = test_loss.unwrap_or(record.train_loss);
         if score < progress.best_loss {
-            best = Some(model.tensors()?);
+            if model.param_count().with_biases <= options.best_in_memory_params {
+                best = Some(model.tensors()?);
+            } else {
+                // A kill before the next checkpoint replays these epochs and rewrites the same
+                // weights.
+                model.save(&folder.weights())?;
+                best = None;
+            }
             progress.best_loss = score;
             progress.best_epoch = epoch;
         }

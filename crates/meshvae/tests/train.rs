@@ -62,9 +62,19 @@ fn options(resume: bool, force: bool) -> TrainOptions {
 
 #[test]
 fn resumed_training_ends_with_the_weights_of_an_uninterrupted_run() {
+    resumption_is_exact(&TrainOptions::default().best_in_memory_params, "mem");
+    // Best weights written as soon as they improve (what large models do).
+    resumption_is_exact(&0, "disk");
+}
+
+fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
+    let options = |resume: bool, force: bool| TrainOptions {
+        best_in_memory_params: *best_in_memory_params,
+        ..options(resume, force)
+    };
     let set = small_set(3, 8);
-    let whole = scratch("whole");
-    let parts = scratch("parts");
+    let whole = scratch(&format!("whole-{tag}"));
+    let parts = scratch(&format!("parts-{tag}"));
 
     let summary = train(&request(&set, &whole, 4), &options(false, false), |_| {}).unwrap();
     assert_eq!(summary.epochs_run, 4);
@@ -89,6 +99,9 @@ fn resumed_training_ends_with_the_weights_of_an_uninterrupted_run() {
     let a = std::fs::read(ModelFolder::new(&whole).checkpoint()).unwrap();
     let b = std::fs::read(ModelFolder::new(&parts).checkpoint()).unwrap();
     assert!(a == b, "checkpoints differ after resumption");
+    let a = std::fs::read(ModelFolder::new(&whole).weights()).unwrap();
+    let b = std::fs::read(ModelFolder::new(&parts).weights()).unwrap();
+    assert!(a == b, "best weights differ after resumption");
     let log_a = read_log(&ModelFolder::new(&whole).log()).unwrap();
     let log_b = read_log(&ModelFolder::new(&parts).log()).unwrap();
     assert_eq!(log_a.len(), 4);

@@ -25,10 +25,20 @@ pub(crate) enum GraphConv {
 }
 
 impl GraphConv {
+    /// x `[B, V, C]` (the tests' reference; the network runs vertex-major).
+    #[cfg(test)]
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         Ok(match self {
             Self::Cheb(c) => c.forward(x)?,
             Self::Spatial(c) => c.forward(x)?,
+        })
+    }
+
+    /// x `[V, B, C]`, the layout the network keeps its activations in (no layer transposes).
+    pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(match self {
+            Self::Cheb(c) => c.forward_vertex_major(x)?,
+            Self::Spatial(c) => c.forward_vertex_major(x)?,
         })
     }
 
@@ -76,9 +86,11 @@ pub(crate) struct ConvBlock {
 }
 
 impl ConvBlock {
-    /// Runs the block; `tied` supplies the convolution of a [`Weights::Tied`] block.
+    /// Runs the block on x `[V, B, C]` (batch norm and tanh act per channel, so they do not
+    /// care about the order of the other two dimensions); `tied` supplies the convolution of a
+    /// [`Weights::Tied`] block.
     pub fn forward(&self, x: &Tensor, mode: Mode, tied: Option<&GraphConv>) -> Result<Tensor> {
-        let y = self.linear(x, tied)?;
+        let y = self.conv(tied)?.forward_vertex_major(x)?;
         Ok(match (&self.bn, self.spec.tanh) {
             (Some(bn), true) => bn.forward_tanh(&y, mode)?,
             (Some(bn), false) => bn.forward(&y, mode)?,
@@ -87,11 +99,16 @@ impl ConvBlock {
         })
     }
 
-    /// The convolution alone (no batch norm, no activation).
+    /// The convolution alone (no batch norm, no activation) on x `[B, V, C]`.
+    #[cfg(test)]
     pub fn linear(&self, x: &Tensor, tied: Option<&GraphConv>) -> Result<Tensor> {
+        self.conv(tied)?.forward(x)
+    }
+
+    fn conv<'a>(&'a self, tied: Option<&'a GraphConv>) -> Result<&'a GraphConv> {
         match (&self.weights, tied) {
-            (Weights::Own(conv), _) => conv.forward(x),
-            (Weights::Tied, Some(conv)) => conv.forward(x),
+            (Weights::Own(conv), _) => Ok(conv),
+            (Weights::Tied, Some(conv)) => Ok(conv),
             (Weights::Tied, None) => Err(VaeError::shape(
                 "ConvBlock::forward",
                 format!(
@@ -113,11 +130,12 @@ pub(crate) enum Down {
 }
 
 impl Down {
+    /// x `[V_i, B, C]` → `[V_{i+1}, B, C]`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         Ok(match self {
-            Self::Mean(p) => p.forward(x)?,
-            Self::Max(p) => p.forward(x)?,
-            Self::Sampling(p) => p.forward(x)?,
+            Self::Mean(p) => p.forward_vertex_major(x)?,
+            Self::Max(p) => p.forward_vertex_major(x)?,
+            Self::Sampling(p) => p.forward_vertex_major(x)?,
             Self::Identity => x.clone(),
         })
     }
@@ -132,10 +150,11 @@ pub(crate) enum Up {
 }
 
 impl Up {
+    /// x `[V_{i+1}, B, C]` → `[V_i, B, C]`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         Ok(match self {
-            Self::DePool(p) => p.forward(x)?,
-            Self::Sampling(p) => p.forward(x)?,
+            Self::DePool(p) => p.forward_vertex_major(x)?,
+            Self::Sampling(p) => p.forward_vertex_major(x)?,
             Self::Identity => x.clone(),
         })
     }
