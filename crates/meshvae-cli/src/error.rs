@@ -12,6 +12,8 @@ pub enum CliError {
     Simplify(#[from] qem_simplify::SimplifyError),
     #[error(transparent)]
     Vae(#[from] meshvae::VaeError),
+    #[error(transparent)]
+    Render(#[from] mesh_render::RenderError),
     /// A bad combination of arguments that clap cannot catch.
     #[error("{argument}: {message}")]
     Argument {

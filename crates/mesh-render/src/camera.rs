@@ -1,0 +1,260 @@
+//! Where the camera looks from ([`View`]), what it frames ([`Bounds`]), and the mapping from
+//! world coordinates to (supersampled) pixel coordinates.
+
+use crate::error::RenderError;
+use std::str::FromStr;
+
+/// The side the orthographic camera looks from. Axes are the mesh's own: `Front` looks along −z
+/// with y up and x to the right; `Left` stands on the −x side, `Top` on the +y side (with −z up
+/// on screen, so the front of the object is at the bottom of the picture), and so on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum View {
+    #[default]
+    Front,
+    Back,
+    Left,
+    Right,
+    Top,
+    Bottom,
+}
+
+impl View {
+    /// Every view, in declaration order.
+    pub const ALL: [View; 6] = [
+        View::Front,
+        View::Back,
+        View::Left,
+        View::Right,
+        View::Top,
+        View::Bottom,
+    ];
+
+    /// The camera's axes in world coordinates: `(right, up, toward the viewer)`, a right-handed
+    /// orthonormal frame (`right × up = toward`).
+    pub fn axes(self) -> ([f32; 3], [f32; 3], [f32; 3]) {
+        match self {
+            View::Front => ([1., 0., 0.], [0., 1., 0.], [0., 0., 1.]),
+            View::Back => ([-1., 0., 0.], [0., 1., 0.], [0., 0., -1.]),
+            View::Left => ([0., 0., 1.], [0., 1., 0.], [-1., 0., 0.]),
+            View::Right => ([0., 0., -1.], [0., 1., 0.], [1., 0., 0.]),
+            View::Top => ([1., 0., 0.], [0., 0., -1.], [0., 1., 0.]),
+            View::Bottom => ([1., 0., 0.], [0., 0., 1.], [0., -1., 0.]),
+        }
+    }
+
+    /// The lower-case name (`front`, `back`, …), as accepted by [`View::from_str`].
+    pub fn name(self) -> &'static str {
+        match self {
+            View::Front => "front",
+            View::Back => "back",
+            View::Left => "left",
+            View::Right => "right",
+            View::Top => "top",
+            View::Bottom => "bottom",
+        }
+    }
+}
+
+impl std::fmt::Display for View {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for View {
+    type Err = RenderError;
+
+    /// Parses `front|back|left|right|top|bottom` (case-insensitive).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        View::ALL
+            .into_iter()
+            .find(|v| v.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| {
+                RenderError::invalid(
+                    "view",
+                    format!(
+                        "unknown view {s:?} (expected front, back, left, right, top or bottom)"
+                    ),
+                )
+            })
+    }
+}
+
+/// An axis-aligned box; the camera frames it so that several meshes rendered with one `Bounds`
+/// are drawn at one scale and position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bounds {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+impl Bounds {
+    /// The smallest box holding every finite point of every frame; `None` when there is none.
+    pub fn of(frames: &[&[[f32; 3]]]) -> Option<Bounds> {
+        let mut points = frames
+            .iter()
+            .flat_map(|f| f.iter())
+            .filter(|p| p.iter().all(|c| c.is_finite()));
+        let first = *points.next()?;
+        Some(points.fold(
+            Bounds {
+                min: first,
+                max: first,
+            },
+            |b, p| Bounds {
+                min: std::array::from_fn(|k| b.min[k].min(p[k])),
+                max: std::array::from_fn(|k| b.max[k].max(p[k])),
+            },
+        ))
+    }
+
+    /// The box grown to hold `other` too.
+    pub fn union(&self, other: &Bounds) -> Bounds {
+        Bounds {
+            min: std::array::from_fn(|k| self.min[k].min(other.min[k])),
+            max: std::array::from_fn(|k| self.max[k].max(other.max[k])),
+        }
+    }
+
+    pub(crate) fn validate(&self, argument: &'static str) -> Result<(), RenderError> {
+        let finite = self.min.iter().chain(&self.max).all(|c| c.is_finite());
+        if !finite || (0..3).any(|k| self.min[k] > self.max[k]) {
+            return Err(RenderError::invalid(
+                argument,
+                format!(
+                    "min {:?} and max {:?} are not a finite box with min <= max",
+                    self.min, self.max
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Fraction of the image width (height) left empty on each side of the framed box, on the
+/// limiting axis.
+pub const MARGIN: f32 = 0.05;
+
+/// World → pixel mapping for one view and frame: `x = cx + s (p·right − u0)`, `y = cy − s (p·up −
+/// v0)` (y grows downwards), depth `p·toward` (larger is nearer).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Projection {
+    pub right: [f32; 3],
+    pub up: [f32; 3],
+    pub toward: [f32; 3],
+    scale: f32,
+    u0: f32,
+    v0: f32,
+    cx: f32,
+    cy: f32,
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl Projection {
+    /// Frames `bounds` in a `width × height` pixel grid with [`MARGIN`], keeping the aspect ratio.
+    pub fn new(view: View, bounds: &Bounds, width: u32, height: u32) -> Projection {
+        let (right, up, toward) = view.axes();
+        let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+        for corner in 0..8 {
+            let p = std::array::from_fn(|k| {
+                if corner >> k & 1 == 0 {
+                    bounds.min[k]
+                } else {
+                    bounds.max[k]
+                }
+            });
+            let (u, v) = (dot(p, right), dot(p, up));
+            (u_lo, u_hi, v_lo, v_hi) = (u_lo.min(u), u_hi.max(u), v_lo.min(v), v_hi.max(v));
+        }
+        let avail_w = width as f32 * (1.0 - 2.0 * MARGIN);
+        let avail_h = height as f32 * (1.0 - 2.0 * MARGIN);
+        let (du, dv) = (u_hi - u_lo, v_hi - v_lo);
+        let scale = match (du > 0.0, dv > 0.0) {
+            (true, true) => (avail_w / du).min(avail_h / dv),
+            (true, false) => avail_w / du,
+            (false, true) => avail_h / dv,
+            // A box without extent on screen: nothing visible is drawn anyway.
+            (false, false) => 1.0,
+        };
+        Projection {
+            right,
+            up,
+            toward,
+            scale,
+            u0: 0.5 * (u_lo + u_hi),
+            v0: 0.5 * (v_lo + v_hi),
+            cx: 0.5 * width as f32,
+            cy: 0.5 * height as f32,
+        }
+    }
+
+    /// Pixel coordinates and depth of a world point.
+    pub fn project(&self, p: [f32; 3]) -> [f32; 3] {
+        [
+            self.cx + self.scale * (dot(p, self.right) - self.u0),
+            self.cy - self.scale * (dot(p, self.up) - self.v0),
+            dot(p, self.toward),
+        ]
+    }
+
+    /// A world direction in camera axes (right, up, toward).
+    pub fn rotate(&self, d: [f32; 3]) -> [f32; 3] {
+        [dot(d, self.right), dot(d, self.up), dot(d, self.toward)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    }
+
+    #[test]
+    fn every_view_is_a_right_handed_orthonormal_frame_looking_from_its_side() {
+        for view in View::ALL {
+            let (r, u, t) = view.axes();
+            assert_eq!(cross(r, u), t, "{view}");
+            assert_eq!(dot(r, u), 0.0, "{view}");
+            assert_eq!(view.name().parse::<View>().unwrap(), view);
+        }
+        // The camera stands on the named side: `toward` points from the object to it.
+        assert_eq!(View::Front.axes().2, [0., 0., 1.]);
+        assert_eq!(View::Left.axes().2, [-1., 0., 0.]);
+        assert_eq!(View::Top.axes().2, [0., 1., 0.]);
+        assert!("sideways".parse::<View>().is_err());
+        assert_eq!(View::default(), View::Front);
+    }
+
+    #[test]
+    fn bounds_are_the_union_of_finite_points() {
+        let a = [[0.0, 1.0, 2.0], [f32::NAN, 9.0, 9.0]];
+        let b = [[-1.0, 5.0, 0.0]];
+        let bounds = Bounds::of(&[&a, &b]).unwrap();
+        assert_eq!(bounds.min, [-1.0, 1.0, 0.0]);
+        assert_eq!(bounds.max, [0.0, 5.0, 2.0]);
+        assert!(Bounds::of(&[&[]]).is_none());
+    }
+
+    #[test]
+    fn projection_centres_the_box_and_keeps_the_margin_on_the_limiting_axis() {
+        let bounds = Bounds {
+            min: [0.0, 0.0, 0.0],
+            max: [2.0, 1.0, 0.0],
+        };
+        let p = Projection::new(View::Front, &bounds, 200, 200);
+        let lo = p.project([0.0, 0.0, 0.0]);
+        let hi = p.project([2.0, 1.0, 0.0]);
+        assert!((lo[0] - 10.0).abs() < 1e-4 && (hi[0] - 190.0).abs() < 1e-4);
+        // y grows downwards; the height is 90 px, centred.
+        assert!((lo[1] - 145.0).abs() < 1e-4 && (hi[1] - 55.0).abs() < 1e-4);
+    }
+}
