@@ -5,10 +5,14 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod embed;
 mod error;
 mod features;
+mod generate;
 mod info;
+mod interpolate;
 mod pack;
+mod render;
 mod simplify;
 mod synth;
 mod train;
@@ -46,6 +50,15 @@ enum Command {
     Eval(train::EvalArgs),
     /// Write a trained model's reconstructions of the test meshes (or all) as OBJ files.
     Reconstruct(train::ReconstructArgs),
+    /// Render a mesh, or a grid of a set's meshes, to PNG (optionally coloured by the error
+    /// against a ground truth).
+    Render(render::RenderArgs),
+    /// Random meshes from a trained model (z ~ N(0, I)), each with its nearest training mesh.
+    Generate(generate::GenerateArgs),
+    /// Decode the latent path between two meshes of the set: OBJ files, a GLB, a PNG strip.
+    Interpolate(interpolate::InterpolateArgs),
+    /// 2-D embeddings of the set (latent, PCA, t-SNE) as a CSV and scatter plots.
+    Embed(embed::EmbedArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +73,10 @@ fn main() -> ExitCode {
         Command::Train(args) => train::run_train(args),
         Command::Eval(args) => train::run_eval(args),
         Command::Reconstruct(args) => train::run_reconstruct(args),
+        Command::Render(args) => render::run(args),
+        Command::Generate(args) => generate::run(args),
+        Command::Interpolate(args) => interpolate::run(args),
+        Command::Embed(args) => embed::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -51,31 +51,43 @@ mod checkpoint;
 mod config;
 mod data;
 mod dense;
+mod embed;
 mod error;
 mod eval;
 mod folder;
+mod generate;
+mod interpolate;
 mod loss;
 mod model;
 mod ops;
 mod params;
+mod pca;
 mod reconstruct;
 mod rng;
 mod split;
 mod sse;
 mod structure;
 mod train;
+mod tsne;
 
 pub use adam::{Adam, AdamConfig};
 pub use batch_norm::BatchNorm;
 pub use checkpoint::{Checkpoint, Progress};
 pub use config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
 pub use data::{MeshData, denormalize};
+pub use embed::{
+    EmbedOptions, Embedding, LoopMeasure, MIN_EMBED_MESHES, embed, largest_variance_dims,
+    loop_measure,
+};
 pub use error::{Result, VaeError};
 pub use eval::{ErrorReport, error_report, mean_shape};
 pub use folder::{ModelFolder, ModelSpec, SplitFile, TrainConfig, TrainedModel};
+pub use generate::{GenerateOptions, Generated, Neighbour, generate};
+pub use interpolate::{Interpolation, interpolate};
 pub use loss::{Loss, LossWeights};
 pub use model::{Encoded, MeshVae, Mode};
 pub use params::{ParamCount, param_count};
+pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
 pub use reconstruct::EvalReport;
 pub use rng::Rng;
 pub use split::{Split, resolve_mesh};
@@ -84,3 +96,4 @@ pub use train::{
     EpochRecord, TrainOptions, TrainRequest, TrainSummary, hierarchy_config, read_log, train,
     validation_loss,
 };
+pub use tsne::{Calibration, TsneOptions, calibrate, tsne, tsne_cost};
