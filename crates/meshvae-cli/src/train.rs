@@ -298,6 +298,13 @@ pub struct ReconstructArgs {
     /// Reconstruct every mesh of the set, not only the test meshes.
     #[arg(long)]
     all: bool,
+    /// Also write sheet.png: each ground truth beside its reconstruction coloured by the
+    /// per-vertex error, with a colour bar.
+    #[arg(long)]
+    sheet: bool,
+    /// The side the sheet's pictures look from.
+    #[arg(long, default_value_t = mesh_render::View::Front)]
+    view: mesh_render::View,
 }
 
 pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
@@ -312,6 +319,12 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
         message: e.to_string(),
     })?;
     let meshes = trained.reconstruct(&set, &ids, &Device::Cpu)?;
+    // Drawn before anything is written, so a failure leaves no partial output.
+    let sheet = if args.sheet {
+        Some(error_sheet(&set, &ids, &meshes, args.view)?)
+    } else {
+        None
+    };
     for (&i, positions) in ids.iter().zip(&meshes) {
         let mesh = TriMesh::new(
             positions.iter().map(|p| p.map(|x| x as f32)).collect(),
@@ -323,10 +336,76 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
             .unwrap_or_else(|| format!("{i}"));
         mesh_io::write_mesh(&args.out.join(format!("{stem}.obj")), &mesh)?;
     }
+    if let Some(sheet) = &sheet {
+        sheet.save_png(&args.out.join("sheet.png"))?;
+    }
     println!(
-        "wrote {} reconstructed meshes to {}",
+        "wrote {} reconstructed meshes{} to {}",
         meshes.len(),
+        if sheet.is_some() {
+            " and sheet.png"
+        } else {
+            ""
+        },
         args.out.display()
     );
     Ok(())
+}
+
+/// Ground truth (grey) beside each reconstruction coloured by its per-vertex distance to the
+/// truth, all in one frame and on one colour scale (0 … the largest error), as the paper's
+/// reconstruction figures.
+fn error_sheet(
+    set: &mesh_io::MeshSet,
+    ids: &[usize],
+    meshes: &[Vec<[f64; 3]>],
+    view: mesh_render::View,
+) -> Result<mesh_render::Image, CliError> {
+    let recon: Vec<Vec<[f32; 3]>> = meshes
+        .iter()
+        .map(|m| m.iter().map(|p| p.map(|x| x as f32)).collect())
+        .collect();
+    let errors: Vec<Vec<f32>> = ids
+        .iter()
+        .zip(&recon)
+        .map(|(&i, r)| {
+            set.frame(i)
+                .iter()
+                .zip(r)
+                .map(|(a, b)| {
+                    let d: f32 = (0..3).map(|k| (a[k] - b[k]) * (a[k] - b[k])).sum();
+                    d.sqrt()
+                })
+                .collect()
+        })
+        .collect();
+    let max = errors
+        .iter()
+        .flatten()
+        .fold(0f32, |m, &e| if e.is_finite() { m.max(e) } else { m });
+    let mut frames: Vec<&[[f32; 3]]> = ids.iter().map(|&i| set.frame(i)).collect();
+    frames.extend(recon.iter().map(|r| r.as_slice()));
+    let options = mesh_render::RenderOptions {
+        width: 256,
+        height: 256,
+        view,
+        frame: mesh_render::Bounds::of(&frames),
+        ..mesh_render::RenderOptions::default()
+    };
+    let mut tiles = Vec::with_capacity(2 * ids.len());
+    for ((&i, r), e) in ids.iter().zip(&recon).zip(&errors) {
+        let name = &set.names()[i];
+        tiles.push(mesh_render::Tile {
+            image: mesh_render::render(set.frame(i), set.faces(), None, &options)?,
+            caption: name.clone(),
+        });
+        let colors = mesh_render::error_colors(e, max);
+        tiles.push(mesh_render::Tile {
+            image: mesh_render::render(r, set.faces(), Some(&colors), &options)?,
+            caption: format!("{name} reconstructed"),
+        });
+    }
+    let columns = if ids.len() > 1 { 4 } else { 2 };
+    let sheet = mesh_render::sheet(&tiles, columns)?;
+    Ok(mesh_render::with_colorbar(&sheet, max, "per-vertex error")?)
 }

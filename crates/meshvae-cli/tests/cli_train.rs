@@ -99,6 +99,39 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     assert!(out.contains("wrote 4 reconstructed meshes"), "{out}");
     let objs = std::fs::read_dir(&rec).unwrap().count();
     assert_eq!(objs, 4);
+    // With --sheet: truth beside reconstruction for the 4 test meshes, 2 pairs per row, plus a
+    // colour bar on the right.
+    let rec_sheet = dir.join("rec-sheet");
+    let out = ok(&meshvae(&[
+        "reconstruct",
+        s(&model),
+        "--out",
+        s(&rec_sheet),
+        "--sheet",
+        "--view",
+        "left",
+    ]));
+    assert!(out.contains("and sheet.png"), "{out}");
+    let bytes = std::fs::read(rec_sheet.join("sheet.png")).unwrap();
+    let image = mesh_render::Image::decode_png(&bytes).unwrap();
+    assert!(
+        image.width > 4 * 256 && image.height >= 2 * 256,
+        "{}x{}",
+        image.width,
+        image.height
+    );
+    fails_with(
+        &meshvae(&[
+            "reconstruct",
+            s(&model),
+            "--out",
+            s(&rec_sheet),
+            "--view",
+            "diagonal",
+        ]),
+        2,
+        "--view",
+    );
 
     // Bad arguments and a foreign set.
     fails_with(&train(&["--structure", "CXC"]), 2, "--structure");
