@@ -2,26 +2,8 @@
 
 mod common;
 
-use common::{meshvae, scratch};
+use common::{fails_with, meshvae, ok, s, scratch};
 use std::path::Path;
-use std::process::Output;
-
-fn ok(out: &Output) -> String {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "failed: {err}");
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails_with(out: &Output, code: i32, part: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(code), "stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    assert!(err.contains(part), "stderr lacks {part:?}: {err}");
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// Decodes a PNG and returns its size; fails the test when it does not decode.
 fn png_size(path: &Path) -> (u32, u32) {

@@ -2,26 +2,7 @@
 
 mod common;
 
-use common::{meshvae, scratch};
-use std::path::Path;
-use std::process::Output;
-
-fn ok(out: &Output) -> String {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "failed: {err}");
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails_with(out: &Output, code: i32, part: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(code), "stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    assert!(err.contains(part), "stderr lacks {part:?}: {err}");
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{fails_with, meshvae, ok, s, scratch};
 
 #[test]
 fn train_eval_reconstruct_on_a_synthetic_set() {

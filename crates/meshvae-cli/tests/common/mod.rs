@@ -1,6 +1,8 @@
-//! Helpers shared by the CLI tests: run the binary, make a scratch folder.
+//! Helpers shared by the CLI tests: run the binary, check its outcome, make a scratch folder.
+// Each test binary compiles this module and uses only some of it.
+#![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// Runs the `meshvae` binary built for these tests.
@@ -17,4 +19,24 @@ pub fn scratch(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// The command's stdout; fails the test (showing stderr) when it did not succeed.
+pub fn ok(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "failed: {err}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The command failed with `code`, without a panic, and its message names `part`.
+pub fn fails_with(out: &Output, code: i32, part: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.contains(part), "stderr lacks {part:?}: {err}");
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
 }
