@@ -1,5 +1,6 @@
 //! `meshvae train`, `meshvae eval`, `meshvae reconstruct`.
 
+use crate::generate::model_and_set;
 use crate::{CliError, print_warnings};
 use candle_core::Device;
 use deform_features::FeatureOptions;
@@ -7,7 +8,7 @@ use mesh_hierarchy::{DepoolMode, HierarchyConfig};
 use mesh_io::{MeshSet, TriMesh};
 use meshvae::{
     ConvKind, ModelConfig, ModelFolder, PoolKind, Split, Structure, TrainConfig, TrainOptions,
-    TrainRequest, TrainedModel,
+    TrainRequest,
 };
 use std::path::{Path, PathBuf};
 
@@ -216,22 +217,6 @@ pub struct EvalArgs {
     /// params_without_biases, epochs, best_epoch, vertices, test_meshes, train_meshes).
     #[arg(long)]
     json: bool,
-}
-
-fn model_and_set(model: &Path, set: Option<&PathBuf>) -> Result<(TrainedModel, MeshSet), CliError> {
-    let trained = TrainedModel::load(model, &Device::Cpu)?;
-    let path = match set {
-        Some(p) => p.clone(),
-        None => trained.spec.source.clone().ok_or_else(|| {
-            CliError::argument(
-                "--set",
-                "the model does not record its mesh set; pass --set",
-            )
-        })?,
-    };
-    let set = load(&path)?;
-    trained.check_set(&set)?;
-    Ok((trained, set))
 }
 
 pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
