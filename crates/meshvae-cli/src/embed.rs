@@ -1,6 +1,7 @@
 //! `meshvae embed`: 2-D embeddings of every mesh of the set — the latent means by their two
 //! most varying dimensions (as the paper), and PCA and t-SNE of the raw features — as a CSV and
-//! three scatter plots side by side, points coloured and joined in frame order.
+//! three scatter plots side by side, points coloured by label (labelled sets) or by frame order,
+//! joined in frame order.
 
 use crate::CliError;
 use crate::generate::{create_out, csv_field, model_and_set, write_png, write_text};
@@ -39,27 +40,45 @@ fn csv(e: &Embedding) -> String {
     out
 }
 
+/// One plot: a labelled set gets one colour per label (with a legend), each label's meshes
+/// joined in frame order; an unlabelled set one series coloured and joined in frame order.
 fn plot(
     title: &str,
     x: &str,
     y: &str,
     points: &[[f64; 2]],
+    labels: Option<&[String]>,
 ) -> Result<mesh_render::Image, CliError> {
-    let series = mesh_render::Series {
-        // One series coloured by frame order: no legend needed.
-        name: String::new(),
-        points: points.iter().map(|p| p.map(|v| v as f32)).collect(),
-        joined: true,
-        color_by_order: true,
+    let point = |i: usize| points[i].map(|v| v as f32);
+    let series: Vec<mesh_render::Series> = match labels {
+        Some(labels) if labels.len() == points.len() => {
+            let mut distinct: Vec<&String> = Vec::new();
+            for l in labels {
+                if !distinct.contains(&l) {
+                    distinct.push(l);
+                }
+            }
+            distinct
+                .iter()
+                .map(|&name| mesh_render::Series {
+                    name: name.clone(),
+                    points: (0..points.len())
+                        .filter(|&i| &labels[i] == name)
+                        .map(point)
+                        .collect(),
+                    joined: true,
+                    color_by_order: false,
+                })
+                .collect()
+        }
+        _ => vec![mesh_render::Series {
+            name: String::new(),
+            points: (0..points.len()).map(point).collect(),
+            joined: true,
+            color_by_order: true,
+        }],
     };
-    Ok(mesh_render::scatter(
-        title,
-        x,
-        y,
-        &[series],
-        PLOT.0,
-        PLOT.1,
-    )?)
+    Ok(mesh_render::scatter(title, x, y, &series, PLOT.0, PLOT.1)?)
 }
 
 pub fn run(args: &EmbedArgs) -> Result<(), CliError> {
@@ -83,18 +102,21 @@ pub fn run(args: &EmbedArgs) -> Result<(), CliError> {
             &format!("z[{d0}]"),
             &format!("z[{d1}]"),
             &e.latent_2d,
+            set.labels(),
         )?,
         plot(
             "PCA of the raw features",
             &format!("PC 1 ({:.0} %)", 100.0 * e.pca_explained[0]),
             &format!("PC 2 ({:.0} %)", 100.0 * e.pca_explained[1]),
             &e.pca_2d,
+            set.labels(),
         )?,
         plot(
             &format!("t-SNE of the raw features (perplexity {:.1})", e.perplexity),
             "t-SNE 1",
             "t-SNE 2",
             &e.tsne_2d,
+            set.labels(),
         )?,
     ];
     let picture = mesh_render::hstack(&images)?;
