@@ -453,50 +453,32 @@ impl CustomOp3 for BatchNormOp {
         else {
             bail!("fused-batch-norm: CPU only");
         };
-        fn tensors<T: Real + candle_core::WithDType>(
-            parts: (Vec<T>, Vec<T>, Vec<T>),
+        /// The backward on one dtype's slices, as tensors shaped like x, γ and β.
+        fn typed<T: Real + candle_core::WithDType>(
+            op: &BatchNormOp,
             x: &Tensor,
-            c: usize,
+            data: [&[T]; 4],
+            layouts: [&Layout; 4],
         ) -> Result<(Tensor, Tensor, Tensor)> {
-            let dev = x.device();
+            const OP: &str = "fused-batch-norm";
+            let [xs, gs, ys, ds] = [0, 1, 2, 3].map(|i| span(OP, data[i], layouts[i]));
+            let (dx, dgamma, dbeta) = op.backward(xs?, gs?, ys?, ds?);
+            let (dev, c) = (x.device(), op.mean.len());
             Ok((
-                Tensor::from_vec(parts.0, x.shape(), dev)?,
-                Tensor::from_vec(parts.1, c, dev)?,
-                Tensor::from_vec(parts.2, c, dev)?,
+                Tensor::from_vec(dx, x.shape(), dev)?,
+                Tensor::from_vec(dgamma, c, dev)?,
+                Tensor::from_vec(dbeta, c, dev)?,
             ))
         }
-        let c = self.mean.len();
-        const OP: &str = "fused-batch-norm";
+        let layouts = [xl, gl, yl, dl];
         let (dx, dgamma, dbeta) = match (xs, gs, ys, ds) {
-            (
-                CpuStorage::F32(x_),
-                CpuStorage::F32(g_),
-                CpuStorage::F32(y_),
-                CpuStorage::F32(d_),
-            ) => {
-                let parts = self.backward(
-                    span(OP, x_, xl)?,
-                    span(OP, g_, gl)?,
-                    span(OP, y_, yl)?,
-                    span(OP, d_, dl)?,
-                );
-                tensors(parts, x, c)?
+            (CpuStorage::F32(a), CpuStorage::F32(b), CpuStorage::F32(c), CpuStorage::F32(d)) => {
+                typed(self, x, [a, b, c, d], layouts)?
             }
-            (
-                CpuStorage::F64(x_),
-                CpuStorage::F64(g_),
-                CpuStorage::F64(y_),
-                CpuStorage::F64(d_),
-            ) => {
-                let parts = self.backward(
-                    span(OP, x_, xl)?,
-                    span(OP, g_, gl)?,
-                    span(OP, y_, yl)?,
-                    span(OP, d_, dl)?,
-                );
-                tensors(parts, x, c)?
+            (CpuStorage::F64(a), CpuStorage::F64(b), CpuStorage::F64(c), CpuStorage::F64(d)) => {
+                typed(self, x, [a, b, c, d], layouts)?
             }
-            _ => bail!("{OP}: f32 or f64 inputs of one dtype only"),
+            _ => bail!("fused-batch-norm: f32 or f64 inputs of one dtype only"),
         };
         Ok((Some(dx), Some(dgamma), Some(dbeta)))
     }
