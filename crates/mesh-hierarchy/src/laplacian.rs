@@ -1,12 +1,35 @@
 //! Graph operators of one level: vertex adjacency, the normalised Laplacian
 //! L = I − D^-1/2 A D^-1/2, and its rescaled form L̃ = 2L/λmax − I that Chebyshev filters use.
 
+use crate::error::HierarchyError;
 use crate::sparse::CsrMatrix;
 use mesh_io::Face;
 
 /// The undirected, unweighted vertex adjacency of a triangle mesh (no self-loops): A[i][j] = 1
 /// when i and j share an edge. As the authors' code: the binarised cotangent-weight pattern.
+///
+/// # Panics
+/// If a face index is `>= vertex_count`; faces of a validated `MeshSet` never are. For faces
+/// that may be out of range, [`try_adjacency`] returns an error instead.
 pub fn adjacency(vertex_count: usize, faces: &[Face]) -> CsrMatrix {
+    match try_adjacency(vertex_count, faces) {
+        Ok(a) => a,
+        Err(e) => panic!("adjacency: {e}"),
+    }
+}
+
+/// [`adjacency`], with out-of-range face indices reported as an error naming the face.
+pub fn try_adjacency(vertex_count: usize, faces: &[Face]) -> Result<CsrMatrix, HierarchyError> {
+    if let Some((i, f)) = faces
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.iter().any(|&v| v as usize >= vertex_count))
+    {
+        return Err(HierarchyError::InvalidArgument {
+            argument: "faces",
+            message: format!("face {i} = {f:?} has an index >= the vertex count {vertex_count}"),
+        });
+    }
     let mut triplets: Vec<(u32, u32, f64)> = Vec::with_capacity(faces.len() * 6);
     for f in faces {
         for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
@@ -18,8 +41,11 @@ pub fn adjacency(vertex_count: usize, faces: &[Face]) -> CsrMatrix {
     }
     triplets.sort_by_key(|t| (t.0, t.1));
     triplets.dedup_by_key(|t| (t.0, t.1));
-    CsrMatrix::from_triplets(vertex_count, vertex_count, &triplets)
-        .expect("face indices are in range for a validated mesh")
+    Ok(CsrMatrix::from_triplets(
+        vertex_count,
+        vertex_count,
+        &triplets,
+    )?)
 }
 
 /// How λmax, the largest eigenvalue of L, is chosen for the rescaling.
@@ -102,6 +128,18 @@ mod tests {
     /// Two triangles sharing an edge: 0-1-2 and 0-2-3.
     fn quad() -> (usize, Vec<Face>) {
         (4, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    #[test]
+    fn out_of_range_faces_are_an_error_naming_the_face() {
+        let err = try_adjacency(3, &[[0, 1, 2], [0, 2, 3]])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("face 1") && err.contains("3"), "{err}");
+        assert_eq!(
+            try_adjacency(4, &[[0, 1, 2], [0, 2, 3]]).unwrap(),
+            adjacency(4, &quad().1)
+        );
     }
 
     #[test]

@@ -40,6 +40,8 @@ pub mod sparse;
 pub use error::HierarchyError;
 pub use file::{FORMAT, VERSION};
 pub use hierarchy::{Hierarchy, HierarchyConfig, Level};
-pub use laplacian::{LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian};
+pub use laplacian::{
+    LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian, try_adjacency,
+};
 pub use pooling::{DepoolMode, Pooler, PoolingOp, UnknownDepoolMode, UnknownPooler};
 pub use sparse::{CsrError, CsrMatrix};
