@@ -8,6 +8,9 @@
 //! the input and the weights requiring gradients (an inner layer of a network).
 //! "vertex-major" rows take and return `[V, B, C]` (`forward_vertex_major`), the layout a network
 //! keeps throughout so that no layer transposes.
+//! "buffer-level" rows run the same kernels on caller-owned `[V, C, B]` slices
+//! (`spectral_conv::ChebKernel`, `SparseKernel`), as meshvae's training engine does: no tensor
+//! allocation, no autograd.
 //! Pooling and de-pooling use mesh-hierarchy's operators for our pooler (modified QEM to half the
 //! vertices, mean pooling, de-pooling by copy).
 
@@ -23,7 +26,8 @@ use mesh_hierarchy::{
     rescaled_laplacian,
 };
 use spectral_conv::{
-    Backend, ChebConv, DePool, MeanPool, SparseOp, locality_order, permute_symmetric,
+    Backend, ChebConv, ChebKernel, ConvDims, DePool, MeanPool, SparseKernel, SparseOp,
+    locality_order, permute_symmetric,
 };
 use std::hint::black_box;
 use std::time::Duration;
@@ -181,6 +185,67 @@ fn conv(c: &mut Criterion) {
                 });
             }
             group.measurement_time(Duration::from_secs(4));
+        }
+        // Buffer-level: the fused kernels on preallocated [V, C, B] slices.
+        {
+            let kernel = ChebKernel::new(&op, 3).expect("kernel");
+            let d = ConvDims {
+                batch: BATCH,
+                c_in: CHANNELS,
+                c_out: CHANNELS,
+            };
+            let n = v * CHANNELS * BATCH;
+            let wv: Vec<f32> = w
+                .as_tensor()
+                .flatten_all()
+                .and_then(|t| t.to_vec1())
+                .expect("w");
+            let xv: Vec<f32> = x
+                .as_tensor()
+                .flatten_all()
+                .and_then(|t| t.to_vec1())
+                .expect("x");
+            let gv: Vec<f32> = r.flatten_all().and_then(|t| t.to_vec1()).expect("g");
+            let mut terms = vec![0.0f32; kernel.terms_len(BATCH, CHANNELS)];
+            let (mut y, mut dx, mut work) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
+            let mut dw = vec![0.0f32; wv.len()];
+            group.bench_function("cheb K=3 fwd, buffer-level", |b| {
+                b.iter(|| {
+                    kernel
+                        .forward(&xv, &wv, d, &mut terms, &mut y)
+                        .expect("forward");
+                    black_box(y[0])
+                })
+            });
+            group.bench_function("cheb K=3 fwd+bwd, buffer-level", |b| {
+                b.iter(|| {
+                    kernel
+                        .forward(&xv, &wv, d, &mut terms, &mut y)
+                        .expect("forward");
+                    let bufs = Some((dx.as_mut_slice(), work.as_mut_slice()));
+                    kernel
+                        .backward(&xv, &terms, &wv, &gv, d, &mut dw, bufs)
+                        .expect("backward");
+                    black_box(dx[0])
+                })
+            });
+            if graph.full {
+                let pool = SparseKernel::new(
+                    MeanPool::new(&graph.pooling, &Device::Cpu)
+                        .expect("pool")
+                        .op(),
+                );
+                let coarse_n = graph.pooling.rows() * CHANNELS * BATCH;
+                let (mut py, mut back) = (vec![0.0f32; coarse_n], vec![0.0f32; n]);
+                group.bench_function("mean pool fwd+bwd, buffer-level", |b| {
+                    b.iter(|| {
+                        pool.apply(&xv, &mut py, CHANNELS * BATCH).expect("pool");
+                        pool.apply_t(&py, &mut back, CHANNELS * BATCH)
+                            .expect("adjoint");
+                        black_box(back[0])
+                    })
+                });
+            }
         }
         // The vertex-major layout [V, B, C] a network keeps throughout (no transposes).
         let x_vm = Var::from_tensor(&random((v, BATCH, CHANNELS), 2)).expect("var");

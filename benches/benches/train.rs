@@ -3,6 +3,9 @@
 //! (8,431 vertices) and elephant-gallop (42,321 vertices) templates, with random features in
 //! (−0.95, 0.95): the step's cost does not depend on the values.
 //!
+//! Two functions: the step `meshvae::train` runs (the hand-written `Engine`), and candle's
+//! autograd path (the reference, and the fallback for models the engine declines).
+//!
 //! `cargo bench -p meshvae-benches --bench train` (needs ../shared/datasets unpacked).
 
 #[global_allocator]
@@ -11,7 +14,7 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use candle_core::{Device, Tensor};
 use criterion::{Criterion, criterion_group, criterion_main};
 use mesh_hierarchy::Hierarchy;
-use meshvae::{Adam, LossWeights, MeshVae, ModelConfig, Rng};
+use meshvae::{Adam, Engine, LossWeights, MeshVae, ModelConfig, Rng};
 use std::time::Duration;
 
 const BATCH: usize = 32;
@@ -40,12 +43,27 @@ fn step(c: &mut Criterion) {
         group
             .sample_size(10)
             .measurement_time(Duration::from_secs(10));
-        group.bench_function("batch 32, f32: forward + backward + Adam", |b| {
+        let mut engine = Engine::new(&model, BATCH)
+            .expect("engine")
+            .expect("the engine supports the paper's network");
+        group.bench_function("batch 32, f32: engine (what train() runs)", |b| {
             b.iter(|| {
                 let eps = rng
                     .normal_tensor((BATCH, config.latent), &device)
                     .expect("eps");
-                // As `meshvae::train` does: the L2 gradient is applied by Adam.
+                engine
+                    .forward_backward(&model, &x, &eps, &weights)
+                    .expect("step");
+                engine.apply_adam(&mut adam, weights.l2).expect("adam");
+            })
+        });
+        drop(engine);
+        group.bench_function("batch 32, f32: candle autograd", |b| {
+            b.iter(|| {
+                let eps = rng
+                    .normal_tensor((BATCH, config.latent), &device)
+                    .expect("eps");
+                // As `meshvae::train` does without the engine: Adam applies the L2 gradient.
                 let loss = model.training_loss(&x, &eps, &weights).expect("loss");
                 let grads = model.backward(&loss.total).expect("backward");
                 adam.step_with_l2(&grads, weights.l2).expect("adam");

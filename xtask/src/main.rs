@@ -2,11 +2,20 @@
 //!
 //! - `cargo xtask datasets [--pack DIR]`: checks that every standard data set is unpacked and
 //!   has the expected counts; with `--pack`, writes each as a `.mvset` cache into DIR.
+//! - `cargo xtask reproduce [--dataset …] [--epochs N] [--seeds N] [--quick]`: trains the
+//!   paper's ablations on our data sets and writes `docs/results.md` (see
+//!   `xtask::reproduce`).
 
 use clap::{Parser, Subcommand};
 use mesh_io::{QualityReport, datasets};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use xtask::reproduce::{self, Options, plan};
+
+// Training allocates large tensors on every step; the `meshvae` command uses mimalloc too, so
+// timings of both agree.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 #[derive(Parser)]
 #[command(name = "cargo xtask")]
@@ -24,12 +33,139 @@ enum Task {
         #[arg(long)]
         pack: Option<PathBuf>,
     },
+    /// Train the paper's ablations and structures on our data sets, several seeds each, and
+    /// write the results beside the paper's numbers. Resumes an interrupted invocation.
+    Reproduce(ReproduceArgs),
+}
+
+#[derive(clap::Args)]
+struct ReproduceArgs {
+    /// Data sets, comma-separated: horse-gallop, samba, elephant-gallop, synthetic, or all
+    /// [default: horse-gallop,samba; with --quick: synthetic and horse-gallop when present].
+    #[arg(long, value_delimiter = ',')]
+    dataset: Vec<String>,
+    /// Epochs per run [default: 600; with --quick: 2].
+    #[arg(long)]
+    epochs: Option<usize>,
+    /// Seeds 1..=N, one split each [default: 3; with --quick: 1].
+    #[arg(long)]
+    seeds: Option<u64>,
+    /// Check the pipeline: a few epochs, one seed, a small synthetic set and horse-gallop.
+    #[arg(long)]
+    quick: bool,
+    /// Folder of the runs' model folders and results [default: target/reproduce, with --quick
+    /// target/reproduce/quick, in the workspace].
+    #[arg(long)]
+    work: Option<PathBuf>,
+    /// The markdown to write [default: docs/results.md in the workspace].
+    #[arg(long)]
+    results: Option<PathBuf>,
+    /// How the reported checkpoint is chosen.
+    #[arg(long, default_value = "select-on-test")]
+    protocol: String,
+    /// No progress bars.
+    #[arg(long)]
+    quiet: bool,
 }
 
 fn main() -> ExitCode {
     match Cli::parse().task {
         Task::Datasets { pack } => check_datasets(pack),
+        Task::Reproduce(args) => match run_reproduce(args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::FAILURE
+            }
+        },
     }
+}
+
+/// The workspace root (the parent of this package), for default paths that do not depend on
+/// where `cargo xtask` is called from.
+fn workspace() -> &'static Path {
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    manifest.parent().unwrap_or(manifest)
+}
+
+fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
+    let mut notes = Vec::new();
+    let names: Vec<String> = if !args.dataset.is_empty() {
+        args.dataset.clone()
+    } else if args.quick {
+        let mut names = vec!["synthetic".to_string()];
+        if datasets::find("horse-gallop").is_some() {
+            names.push("horse-gallop".into());
+        } else {
+            notes.push("horse-gallop was not found and was left out of the quick run.".into());
+        }
+        names
+    } else {
+        vec!["horse-gallop".into(), "samba".into()]
+    };
+    let mut chosen: Vec<&'static plan::Dataset> = Vec::new();
+    for name in &names {
+        if name == "all" {
+            chosen.extend(plan::DATASETS.iter());
+            continue;
+        }
+        let dataset = plan::dataset(name).ok_or_else(|| reproduce::ReproError::Argument {
+            arg: "--dataset",
+            message: format!(
+                "{name:?} is not one of {}, all",
+                plan::DATASETS
+                    .iter()
+                    .map(|d| d.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })?;
+        chosen.push(dataset);
+    }
+    chosen.dedup_by_key(|d| d.name);
+    let protocol =
+        plan::protocol(&args.protocol).ok_or_else(|| reproduce::ReproError::Argument {
+            arg: "--protocol",
+            message: format!(
+                "{:?} is not one of {}",
+                args.protocol,
+                plan::PROTOCOLS
+                    .iter()
+                    .map(|p| p.id)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })?;
+    let default_work = if args.quick {
+        workspace().join("target/reproduce/quick")
+    } else {
+        workspace().join("target/reproduce")
+    };
+    let options = Options {
+        datasets: chosen,
+        epochs: args.epochs.unwrap_or(if args.quick { 2 } else { 600 }),
+        seeds: args.seeds.unwrap_or(if args.quick { 1 } else { 3 }),
+        quick: args.quick,
+        protocol,
+        work: args.work.unwrap_or(default_work),
+        results: args
+            .results
+            .unwrap_or_else(|| workspace().join("docs/results.md")),
+        command: std::iter::once("cargo xtask".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" "),
+        progress: !args.quiet,
+    };
+    let outcome = reproduce::reproduce(options, notes)?;
+    println!(
+        "{} runs ({} reused) in {:.1} min; wrote {}",
+        outcome.results.len(),
+        outcome.reused,
+        outcome.wall_seconds / 60.0,
+        outcome.options.results.display()
+    );
+    Ok(())
 }
 
 fn check_datasets(pack: Option<PathBuf>) -> ExitCode {

@@ -6,10 +6,12 @@ use std::str::FromStr;
 
 /// The side the orthographic camera looks from. Axes are the mesh's own: `Front` looks along −z
 /// with y up and x to the right; `Left` stands on the −x side, `Top` on the +y side (with −z up
-/// on screen, so the front of the object is at the bottom of the picture), and so on.
+/// on screen, so the front of the object is at the bottom of the picture), and so on. `Auto`
+/// (the default) picks one of those six from the box being framed: see [`View::resolve`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum View {
     #[default]
+    Auto,
     Front,
     Back,
     Left,
@@ -19,7 +21,7 @@ pub enum View {
 }
 
 impl View {
-    /// Every view, in declaration order.
+    /// Every fixed view (all but [`View::Auto`]), in declaration order.
     pub const ALL: [View; 6] = [
         View::Front,
         View::Back,
@@ -30,10 +32,11 @@ impl View {
     ];
 
     /// The camera's axes in world coordinates: `(right, up, toward the viewer)`, a right-handed
-    /// orthonormal frame (`right × up = toward`).
+    /// orthonormal frame (`right × up = toward`). `Auto` has no axes of its own until
+    /// [resolved](View::resolve) against a box; unresolved, it gives the front view's.
     pub fn axes(self) -> ([f32; 3], [f32; 3], [f32; 3]) {
         match self {
-            View::Front => ([1., 0., 0.], [0., 1., 0.], [0., 0., 1.]),
+            View::Auto | View::Front => ([1., 0., 0.], [0., 1., 0.], [0., 0., 1.]),
             View::Back => ([-1., 0., 0.], [0., 1., 0.], [0., 0., -1.]),
             View::Left => ([0., 0., 1.], [0., 1., 0.], [-1., 0., 0.]),
             View::Right => ([0., 0., -1.], [0., 1., 0.], [1., 0., 0.]),
@@ -42,9 +45,34 @@ impl View {
         }
     }
 
-    /// The lower-case name (`front`, `back`, …), as accepted by [`View::from_str`].
+    /// The fixed view that `self` stands for when framing `bounds`: a fixed view is itself;
+    /// `Auto` looks along the box's thinnest axis, so the shape is seen broadside rather than
+    /// end-on, and keeps the mesh's y axis up whenever y is not that axis, because mesh files
+    /// are conventionally y-up (glTF requires it; the OBJ sets meshvae uses follow it), so
+    /// standing shapes stay standing: thinnest x → [`View::Left`], thinnest z →
+    /// [`View::Front`], and a shape flat in y → [`View::Top`]. Ties go to z, then x, then y
+    /// (front before side before top), so a cube is seen from the front.
+    pub fn resolve(self, bounds: &Bounds) -> View {
+        if self != View::Auto {
+            return self;
+        }
+        let extent = |k: usize| bounds.max[k] - bounds.min[k];
+        // Preference order on ties; `min_by` keeps the first of equal elements.
+        let thinnest = [2, 0, 1]
+            .into_iter()
+            .min_by(|&a, &b| extent(a).total_cmp(&extent(b)))
+            .unwrap_or(2);
+        match thinnest {
+            0 => View::Left,
+            1 => View::Top,
+            _ => View::Front,
+        }
+    }
+
+    /// The lower-case name (`auto`, `front`, `back`, …), as accepted by [`View::from_str`].
     pub fn name(self) -> &'static str {
         match self {
+            View::Auto => "auto",
             View::Front => "front",
             View::Back => "back",
             View::Left => "left",
@@ -64,16 +92,17 @@ impl std::fmt::Display for View {
 impl FromStr for View {
     type Err = RenderError;
 
-    /// Parses `front|back|left|right|top|bottom` (case-insensitive).
+    /// Parses `auto|front|back|left|right|top|bottom` (case-insensitive).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        View::ALL
-            .into_iter()
+        std::iter::once(View::Auto)
+            .chain(View::ALL)
             .find(|v| v.name().eq_ignore_ascii_case(s))
             .ok_or_else(|| {
                 RenderError::invalid(
                     "view",
                     format!(
-                        "unknown view {s:?} (expected front, back, left, right, top or bottom)"
+                        "unknown view {s:?} (expected auto, front, back, left, right, top or \
+                         bottom)"
                     ),
                 )
             })
@@ -154,9 +183,10 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
 }
 
 impl Projection {
-    /// Frames `bounds` in a `width × height` pixel grid with [`MARGIN`], keeping the aspect ratio.
+    /// Frames `bounds` in a `width × height` pixel grid with [`MARGIN`], keeping the aspect ratio;
+    /// [`View::Auto`] is resolved against `bounds`.
     pub fn new(view: View, bounds: &Bounds, width: u32, height: u32) -> Projection {
-        let (right, up, toward) = view.axes();
+        let (right, up, toward) = view.resolve(bounds).axes();
         let (mut u_lo, mut u_hi, mut v_lo, mut v_hi) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
         for corner in 0..8 {
             let p = std::array::from_fn(|k| {
@@ -231,7 +261,55 @@ mod tests {
         assert_eq!(View::Left.axes().2, [-1., 0., 0.]);
         assert_eq!(View::Top.axes().2, [0., 1., 0.]);
         assert!("sideways".parse::<View>().is_err());
-        assert_eq!(View::default(), View::Front);
+        assert_eq!("AUTO".parse::<View>().unwrap(), View::Auto);
+        assert_eq!(View::default(), View::Auto);
+    }
+
+    #[test]
+    fn auto_looks_along_the_thinnest_axis_and_shows_the_long_axis_in_full() {
+        for long in 0..3 {
+            for thin in (0..3).filter(|&k| k != long) {
+                // Extents 4 along `long`, 0.5 along `thin`, 1 along the third axis.
+                let mut max = [1.0f32; 3];
+                max[long] = 4.0;
+                max[thin] = 0.5;
+                let bounds = Bounds {
+                    min: [-1.0, 2.0, 0.5],
+                    max: std::array::from_fn(|k| max[k] + [-1.0, 2.0, 0.5][k]),
+                };
+                let view = View::Auto.resolve(&bounds);
+                assert_ne!(view, View::Auto);
+                let (right, up, toward) = view.axes();
+                let axis = |k: usize| -> [f32; 3] { std::array::from_fn(|j| f32::from(j == k)) };
+                let case = format!("long {long}, thin {thin}: {view}");
+                assert_eq!(dot(toward, axis(thin)).abs(), 1.0, "{case}");
+                // The long axis lies in the picture plane: it is the right or the up axis.
+                let on_screen = dot(right, axis(long)).abs() + dot(up, axis(long)).abs();
+                assert_eq!(on_screen, 1.0, "{case}");
+                // y stays up unless y is the thinnest axis.
+                if thin != 1 {
+                    assert_eq!(up, [0.0, 1.0, 0.0], "{case}");
+                }
+                // Drawn, the box's long axis is its longer side on screen.
+                let p = Projection::new(View::Auto, &bounds, 100, 100);
+                let (lo, hi) = (p.project(bounds.min), p.project(bounds.max));
+                let (w, h) = ((hi[0] - lo[0]).abs(), (hi[1] - lo[1]).abs());
+                assert!((w.max(h) - 90.0).abs() < 1e-3, "{case}: {w} x {h}");
+                assert!((w.min(h) - 22.5).abs() < 1e-3, "{case}: {w} x {h}");
+            }
+        }
+        // Fixed views are themselves; ties prefer front, then the side, then the top.
+        let cube = Bounds {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        assert_eq!(View::Top.resolve(&cube), View::Top);
+        assert_eq!(View::Auto.resolve(&cube), View::Front);
+        let long_z = Bounds {
+            min: [0.0; 3],
+            max: [1.0, 1.0, 2.0],
+        };
+        assert_eq!(View::Auto.resolve(&long_z), View::Left);
     }
 
     #[test]

@@ -6,11 +6,12 @@
 //! ([`scatter`]), side-by-side panels ([`hstack`]) — written as PNG ([`Image::save_png`],
 //! atomically).
 //!
-//! [`render`] is a software rasterizer: orthographic camera from one of six [`View`]s framing a
-//! box ([`Bounds`]; give several renders the same one to compare sizes), z-buffer, Lambert
-//! shading with a headlight and ambient term, both sides of every face lit (open meshes show
-//! their inside, darker), smooth normals except at creases, 2×2 supersampling, rayon over bands
-//! of rows. Text uses the embedded DejaVu Sans font: no GPU, no system library, no font files.
+//! [`render`] is a software rasterizer: orthographic camera from one of six [`View`]s, or by
+//! default `View::Auto` (along the box's thinnest axis, y up where possible: long shapes are seen
+//! broadside, standing ones standing), framing a box ([`Bounds`]; give several renders the same
+//! one to compare sizes and to get one view for all), z-buffer, Lambert shading with a headlight
+//! and ambient term, both sides of every face lit (open meshes show their inside, darker), smooth
+//! normals except at creases, 2×2 supersampling, rayon over bands of rows. Text uses the embedded DejaVu Sans font: no GPU, no system library, no font files.
 //! Bad input (a face index out of range, NaN, a zero size, colours of the wrong length, …) is a
 //! [`RenderError`] naming the argument, never a panic.
 //!

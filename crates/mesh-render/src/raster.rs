@@ -24,12 +24,12 @@ pub struct RenderOptions {
 }
 
 impl Default for RenderOptions {
-    /// 512 × 512, front view, the mesh's own box, white.
+    /// 512 × 512, the automatic view ([`View::resolve`]), the mesh's own box, white.
     fn default() -> Self {
         Self {
             width: 512,
             height: 512,
-            view: View::Front,
+            view: View::Auto,
             frame: None,
             background: [255; 3],
         }
@@ -66,9 +66,10 @@ const CREASE_COS: f32 = 0.7;
 /// Shaded z-buffer rendering of a triangle mesh; `colors` per vertex (interpolated), or `None`
 /// for [`NEUTRAL_GREY`].
 ///
-/// Orthographic camera from `options.view`, framing `options.frame` (or the mesh's bounding box)
-/// with a [`crate::MARGIN`] on the limiting axis, aspect kept. Both sides of every face are shaded
-/// (open meshes show their inside, darker). Errors: empty positions or faces, a non-finite
+/// Orthographic camera from `options.view` ([`View::Auto`] resolved against the framed box),
+/// framing `options.frame` (or the mesh's bounding box) with a [`crate::MARGIN`] on the limiting
+/// axis, aspect kept. Both sides of every face are shaded (open meshes show their inside,
+/// darker). Errors: empty positions or faces, a non-finite
 /// coordinate, a face index out of range, colours of the wrong length, a zero or too large size,
 /// a bad frame.
 pub fn render(

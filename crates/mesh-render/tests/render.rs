@@ -336,3 +336,51 @@ fn the_background_option_and_a_real_horse_render() {
     // A galloping horse from the side: body, legs and tail, far from empty or full.
     assert!((0.12..0.6).contains(&fraction), "{fraction}");
 }
+
+#[test]
+fn the_default_auto_view_shows_long_shapes_broadside_and_the_horse_side_on() {
+    // The synthetic capsule lies along z: the front view sees a disc, auto sees its length.
+    let capsule = mesh_io::synth::rest_capsule(&mesh_io::synth::SynthConfig::default());
+    let (w, h) = (200, 200);
+    let drawn = |view: View| {
+        let image = render(
+            &capsule.positions,
+            &capsule.faces,
+            None,
+            &options(w, h, view),
+        )
+        .unwrap();
+        let (x0, y0, x1, y1) = bbox_of(&image, |c| c != WHITE).unwrap();
+        (f64::from(x1 - x0 + 1), f64::from(y1 - y0 + 1))
+    };
+    assert_eq!(RenderOptions::default().view, View::Auto);
+    let (fw, fh) = drawn(View::Front);
+    assert!((fw / fh - 1.0).abs() < 0.5, "front: {fw} x {fh}");
+    // Axis 5 long, at most 1.4 wide: the long side spans the image minus its margins.
+    let (aw, ah) = drawn(View::Auto);
+    let (long, short) = (aw.max(ah), aw.min(ah));
+    assert!(
+        (long - 0.9 * f64::from(w)).abs() <= 2.0,
+        "auto: {aw} x {ah}"
+    );
+    assert!(long > 3.0 * short, "auto: {aw} x {ah}");
+
+    let Some(dir) = mesh_io::datasets::find_or_skip("horse-gallop") else {
+        return;
+    };
+    let files = mesh_io::set::list_mesh_files(&dir).unwrap();
+    let horse = mesh_io::read_mesh(&files[0]).unwrap().value;
+    let bounds = Bounds::of(&[&horse.positions]).unwrap();
+    // Head to tail along z, thinnest across x: seen from the side, standing.
+    assert_eq!(View::Auto.resolve(&bounds), View::Left);
+    let image = render(
+        &horse.positions,
+        &horse.faces,
+        None,
+        &options(w, h, View::Auto),
+    )
+    .unwrap();
+    let (x0, y0, x1, y1) = bbox_of(&image, |c| c != WHITE).unwrap();
+    let (bw, bh) = (f64::from(x1 - x0 + 1), f64::from(y1 - y0 + 1));
+    assert!(bw > 1.3 * bh, "{bw} x {bh}");
+}

@@ -5,7 +5,7 @@
 
 use crate::CliError;
 use crate::generate::{create_out, csv_field, model_and_set, write_png, write_text};
-use meshvae::{EmbedOptions, Embedding, loop_measure};
+use meshvae::{EmbedOptions, loop_measure};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -29,13 +29,22 @@ pub struct EmbedArgs {
 /// Pixels of each of the three plots.
 const PLOT: (u32, u32) = (560, 520);
 
-fn csv(e: &Embedding) -> String {
-    let mut out = String::from("name,frame,latent_x,latent_y,pca_x,pca_y,tsne_x,tsne_y\n");
-    for (i, name) in e.names.iter().enumerate() {
-        let [lx, ly] = e.latent_2d[i];
-        let [px, py] = e.pca_2d[i];
-        let [tx, ty] = e.tsne_2d[i];
-        out += &format!("{},{i},{lx},{ly},{px},{py},{tx},{ty}\n", csv_field(name));
+/// The CSV: one row per mesh with its latent, PCA and t-SNE coordinates (`points`). `label` is
+/// last (so the earlier columns keep their positions) and always present, empty for a set
+/// without labels, so that the schema is fixed.
+fn csv(names: &[String], points: [&[[f64; 2]]; 3], labels: Option<&[String]>) -> String {
+    let mut out = String::from("name,frame,latent_x,latent_y,pca_x,pca_y,tsne_x,tsne_y,label\n");
+    for (i, name) in names.iter().enumerate() {
+        out += &csv_field(name);
+        out += &format!(",{i}");
+        for p in points {
+            let [x, y] = p.get(i).copied().unwrap_or([f64::NAN; 2]);
+            out += &format!(",{x},{y}");
+        }
+        let label = labels
+            .and_then(|l| l.get(i))
+            .map_or(String::new(), |l| csv_field(l));
+        out += &format!(",{label}\n");
     }
     out
 }
@@ -122,7 +131,14 @@ pub fn run(args: &EmbedArgs) -> Result<(), CliError> {
     let picture = mesh_render::hstack(&images)?;
 
     create_out(&args.out)?;
-    write_text(&args.out.join("embedding.csv"), &csv(&e))?;
+    write_text(
+        &args.out.join("embedding.csv"),
+        &csv(
+            &e.names,
+            [&e.latent_2d, &e.pca_2d, &e.tsne_2d],
+            set.labels(),
+        ),
+    )?;
     write_png(&args.out.join("embedding.png"), &picture)?;
     println!(
         "wrote embedding.csv and embedding.png ({} meshes) to {}",
@@ -146,4 +162,31 @@ pub fn run(args: &EmbedArgs) -> Result<(), CliError> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_csv_has_a_label_column_filled_only_for_a_labelled_set() {
+        let names = ["a".to_string(), "b,c".to_string()];
+        let points: [&[[f64; 2]]; 3] = [
+            &[[0.5, -1.0], [2.0, 3.0]],
+            &[[1.0, 2.0], [3.0, 4.0]],
+            &[[-1.0, 1.0], [0.25, 0.0]],
+        ];
+        let header = "name,frame,latent_x,latent_y,pca_x,pca_y,tsne_x,tsne_y,label";
+        let labels = ["bend".to_string(), "a \"b\", c".to_string()];
+        assert_eq!(
+            csv(&names, points, Some(&labels)),
+            format!(
+                "{header}\na,0,0.5,-1,1,2,-1,1,bend\n\"b,c\",1,2,3,3,4,0.25,0,\"a \"\"b\"\", c\"\n"
+            )
+        );
+        assert_eq!(
+            csv(&names, points, None),
+            format!("{header}\na,0,0.5,-1,1,2,-1,1,\n\"b,c\",1,2,3,3,4,0.25,0,\n")
+        );
+    }
 }

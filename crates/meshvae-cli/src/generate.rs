@@ -21,6 +21,10 @@ pub struct GenerateArgs {
     /// Seeds the latent draws (same seed, same meshes).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// The label to generate for a conditional model (trained with --labels or --conditional);
+    /// required for such a model, refused for another.
+    #[arg(long)]
+    label: Option<String>,
     /// The mesh set (default: the one recorded in the model's config); the nearest training
     /// meshes come from it.
     #[arg(long)]
@@ -28,8 +32,8 @@ pub struct GenerateArgs {
     /// Also write sheet.png: each sample beside its nearest training mesh.
     #[arg(long)]
     sheet: bool,
-    /// The side the pictures look from (front, back, left, right, top, bottom).
-    #[arg(long, default_value = "front")]
+    /// The side the pictures look from (auto, front, back, left, right, top, bottom).
+    #[arg(long, default_value = "auto")]
     view: View,
 }
 
@@ -138,7 +142,7 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
         count: args.count,
         seed: args.seed,
     };
-    let generated = meshvae::generate(&trained, &set, &options)?;
+    let generated = trained.generate_labelled(&set, &options, args.label.as_deref())?;
     let meshes: Vec<TriMesh> = generated
         .positions
         .iter()
@@ -153,7 +157,11 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
     let sheet = if args.sheet {
         let mut pairs: Vec<(&[[f32; 3]], String)> = Vec::with_capacity(2 * args.count);
         for (i, (mesh, nb)) in meshes.iter().zip(&generated.nearest).enumerate() {
-            pairs.push((&mesh.positions, format!("sample {i}")));
+            let caption = match &args.label {
+                Some(label) => format!("sample {i} ({label})"),
+                None => format!("sample {i}"),
+            };
+            pairs.push((&mesh.positions, caption));
             pairs.push((
                 set.frame(nb.index),
                 format!("{} (d {:.2e})", nb.name, nb.distance),
@@ -173,31 +181,41 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
     for (mesh, file) in meshes.iter().zip(&files) {
         mesh_io::write_mesh(&args.out.join(file), mesh)?;
     }
-    let mut csv = String::from("sample,file,nearest,nearest_index,distance,distance_rel\n");
+    let mut csv = String::from(
+        "sample,file,label,nearest,nearest_index,nearest_label,distance,distance_rel\n",
+    );
     let mut rows = Vec::with_capacity(args.count);
+    let label = generated.label.as_deref();
     for (i, (file, nb)) in files.iter().zip(&generated.nearest).enumerate() {
         csv += &format!(
-            "{i},{file},{},{},{},{}\n",
+            "{i},{file},{},{},{},{},{},{}\n",
+            csv_field(label.unwrap_or("")),
             csv_field(&nb.name),
             nb.index,
+            csv_field(nb.label.as_deref().unwrap_or("")),
             nb.distance,
             nb.distance_rel
         );
         rows.push(serde_json::json!({
             "sample": i,
             "file": file,
+            "label": label,
             "nearest": nb.name,
             "nearest_index": nb.index,
+            "nearest_label": nb.label,
             "distance": nb.distance,
             "distance_rel": nb.distance_rel,
             "latent": generated.latents[i],
         }));
     }
     write_text(&args.out.join("report.csv"), &csv)?;
+    let share = generated.label_share();
     let report = serde_json::json!({
         "model": args.model,
         "seed": args.seed,
         "count": args.count,
+        "label": label,
+        "label_share": share,
         "distance": "mean per-vertex Euclidean distance to the nearest training mesh, centroids aligned",
         "samples": rows,
     });
@@ -218,5 +236,18 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
         args.out.display()
     );
     println!("mean distance to the nearest training mesh: {mean:.3e} of the template's diagonal");
+    if let (Some(label), Some(share)) = (label, share) {
+        let hits = generated
+            .nearest
+            .iter()
+            .filter(|n| n.label.as_deref() == Some(label))
+            .count();
+        println!(
+            "label {label}: {hits} of {} samples ({:.0} %) have their nearest training mesh \
+             labelled {label}",
+            args.count,
+            100.0 * share
+        );
+    }
     Ok(())
 }

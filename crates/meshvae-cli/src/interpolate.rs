@@ -26,8 +26,9 @@ pub struct InterpolateArgs {
     /// The mesh set (default: the one recorded in the model's config).
     #[arg(long)]
     set: Option<PathBuf>,
-    /// The side the strip looks from (front, back, left, right, top, bottom).
-    #[arg(long, default_value = "front")]
+    /// The side the strip looks from: auto (along the thinnest axis of the box, y up where
+    /// possible), front, back, left, right, top or bottom.
+    #[arg(long, default_value = "auto")]
     view: View,
 }
 

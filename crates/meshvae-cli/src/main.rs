@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod demo;
 mod embed;
 mod error;
 mod features;
@@ -32,11 +33,15 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The whole pipeline on a built-in synthetic set in a few minutes: training, evaluation,
+    /// generations, an interpolation, an embedding and pictures of each.
+    Demo(demo::DemoArgs),
     /// Check a mesh set and print its counts and quality report.
     Info(info::InfoArgs),
     /// Write the synthetic bend/twist capsule set as OBJ files plus labels.csv.
     Synth(synth::SynthArgs),
-    /// Pack a mesh set into one binary cache file (.mvset) that loads fast.
+    /// Pack a mesh set into one binary cache file (.mvset) that loads fast; several sets of one
+    /// connectivity into one set labelled by set.
     Pack(pack::PackArgs),
     /// Compute the ACAP deformation features of a set (safetensors, normalisation as metadata).
     Features(features::FeaturesArgs),
@@ -62,8 +67,10 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    restore_default_sigpipe();
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Demo(args) => demo::run(args),
         Command::Info(args) => info::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Pack(args) => pack::run(args),
@@ -84,6 +91,16 @@ fn main() -> ExitCode {
             eprintln!("error: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Rust ignores SIGPIPE, so `println!` into a closed pipe (`meshvae info … | head -1`) panics.
+/// A command-line tool should end quietly instead, as `cat` does.
+fn restore_default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any thread exists; SIG_DFL is a valid action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

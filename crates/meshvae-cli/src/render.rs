@@ -19,8 +19,9 @@ pub struct RenderArgs {
     /// The PNG to write (atomically: nothing is written on error).
     #[arg(long)]
     out: PathBuf,
-    /// The side the camera looks from (front looks along -z with y up).
-    #[arg(long, default_value = "front", value_parser = parse_view)]
+    /// The side the camera looks from: auto (along the framed box's thinnest axis, y up unless
+    /// the shape is flat in y), front (along -z, y up), back, left, right, top or bottom.
+    #[arg(long, default_value = "auto", value_parser = parse_view)]
     view: View,
     /// Width and height in pixels of the picture (one mesh; default 512) or of each tile of a
     /// grid (default 256).

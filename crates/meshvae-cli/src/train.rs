@@ -59,6 +59,14 @@ pub struct TrainArgs {
     /// A file of test mesh names (one per line).
     #[arg(long, requires = "train_list")]
     test_list: Option<PathBuf>,
+    /// Train a conditional VAE on these labels: a CSV of `file,label` lines, one per mesh
+    /// (generate with `meshvae generate --label L`).
+    #[arg(long, conflicts_with = "conditional")]
+    labels: Option<PathBuf>,
+    /// Train a conditional VAE on the set's own labels (its folder's labels.csv, or a labelled
+    /// .mvset such as `meshvae pack` of several sets writes).
+    #[arg(long)]
+    conditional: bool,
     /// De-pooling: copy (each fine vertex gets its coarse value) or transpose (the authors':
     /// divided by the cluster size) [default: copy].
     #[arg(long)]
@@ -109,7 +117,7 @@ fn read_list(path: &Path) -> Result<Vec<String>, CliError> {
 }
 
 pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
-    let set = load(&args.set)?;
+    let mut set = load(&args.set)?;
     let folder = ModelFolder::new(&args.out);
     // Resuming: every setting not given again comes from the model's own config.
     let stored = if args.resume {
@@ -117,6 +125,19 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     } else {
         None
     };
+    if let Some(path) = &args.labels {
+        let labels = mesh_io::labels::read_labels(path, set.names())?;
+        set = set.with_labels(labels)?;
+    } else if let Some(spec) = &stored {
+        // A resumed conditional model keeps the labels it was trained with (they may have come
+        // from a --labels file rather than the set).
+        if let Some(labels) = &spec.labels
+            && set.labels().is_none()
+            && set.names() == spec.names.as_slice()
+        {
+            set = set.with_labels(labels.clone())?;
+        }
+    }
     let base_model = stored.as_ref().map(|s| s.model.clone()).unwrap_or_default();
     let base_train = stored
         .as_ref()
@@ -146,6 +167,21 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         channels: args.channels.unwrap_or(base_model.channels),
         ..base_model
     };
+    let model = if args.labels.is_some() || args.conditional {
+        let labels = set.labels().ok_or_else(|| {
+            CliError::argument(
+                "--conditional",
+                format!(
+                    "{} has no labels (no labels.csv beside its meshes); pass --labels FILE",
+                    args.set.display()
+                ),
+            )
+        })?;
+        model.conditional_on(labels)
+    } else {
+        model
+    };
+    let conditional = model.labels.clone();
     let mut train = base_train.clone();
     train.epochs = args.epochs.unwrap_or(base_train.epochs);
     train.seed = args.seed.unwrap_or(base_train.seed);
@@ -201,6 +237,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         summary.best_epoch,
         summary.best_loss
     );
+    if !conditional.is_empty() {
+        println!("conditional on the labels {}", conditional.join(", "));
+    }
     println!("model: {}", args.out.display());
     Ok(())
 }
@@ -288,7 +327,7 @@ pub struct ReconstructArgs {
     #[arg(long)]
     sheet: bool,
     /// The side the sheet's pictures look from.
-    #[arg(long, default_value_t = mesh_render::View::Front)]
+    #[arg(long, default_value_t = mesh_render::View::Auto)]
     view: mesh_render::View,
 }
 

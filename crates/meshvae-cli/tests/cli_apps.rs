@@ -158,19 +158,20 @@ fn generate_interpolate_embed_on_a_synthetic_set() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "name,frame,latent_x,latent_y,pca_x,pca_y,tsne_x,tsne_y"
+        "name,frame,latent_x,latent_y,pca_x,pca_y,tsne_x,tsne_y,label"
     );
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 8);
     for (i, row) in rows.iter().enumerate() {
         let cells: Vec<&str> = row.split(',').collect();
-        assert_eq!(cells.len(), 8, "{row}");
+        assert_eq!(cells.len(), 9, "{row}");
         assert_eq!(cells[1], i.to_string());
         assert!(
-            cells[2..]
+            cells[2..8]
                 .iter()
                 .all(|c| c.parse::<f64>().unwrap().is_finite())
         );
+        assert_eq!(cells[8], ["bend", "twist"][i % 2], "{row}");
     }
     let (w, h) = png_size(&emb_dir.join("embedding.png"));
     assert!(w > 2 * h, "three plots side by side: {w} × {h}");

@@ -9,10 +9,11 @@
 use crate::error::{Result, VaeError};
 use crate::ops::{CHUNK, Real, span, span_mut};
 use candle_core::backprop::GradStore;
-use candle_core::{CpuStorage, InplaceOp2, InplaceOp3, Layout, bail};
+use candle_core::{CpuStorage, InplaceOp1, InplaceOp2, InplaceOp3, Layout, bail};
 use candle_core::{DType, Tensor, Var};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::cell::RefCell;
 use std::collections::HashMap;
 
 /// Adam's hyper-parameters.
@@ -180,6 +181,65 @@ impl Adam {
             slot.var.set(&theta)?;
         }
         Ok(())
+    }
+
+    /// The optimised variables' names, in the order of [`Self::step_with_slices`]'s gradients.
+    pub(crate) fn names(&self) -> impl Iterator<Item = &str> {
+        self.slots.iter().map(|s| s.name.as_str())
+    }
+
+    /// One update from gradient slices, one per variable in the optimiser's order (f32/f64 CPU
+    /// variables of type `T`), plus the gradient `l2 · θ` of the L2 term as
+    /// [`Self::step_with_l2`]. One fused pass per variable over θ, m, v and g, which also
+    /// returns Σ ½‖θ‖² of the weights before the update (the L2 term's value, unweighted).
+    pub(crate) fn step_with_slices<T: Real>(&mut self, grads: &[&[T]], l2: f64) -> Result<f64> {
+        if grads.len() != self.slots.len() {
+            return Err(VaeError::argument(
+                "adam gradients",
+                format!("{} slices for {} variables", grads.len(), self.slots.len()),
+            ));
+        }
+        for (s, g) in self.slots.iter().zip(grads) {
+            if s.var.elem_count() != g.len() || s.var.dtype() != T::DTYPE_OF {
+                return Err(VaeError::argument(
+                    "adam gradients",
+                    format!(
+                        "{} values of {:?} for {} ({} of {:?})",
+                        g.len(),
+                        T::DTYPE_OF,
+                        s.name,
+                        s.var.elem_count(),
+                        s.var.dtype()
+                    ),
+                ));
+            }
+        }
+        self.step += 1;
+        let AdamConfig {
+            lr,
+            beta1,
+            beta2,
+            eps,
+        } = self.config;
+        let t = i32::try_from(self.step).unwrap_or(i32::MAX);
+        let update = FusedUpdate {
+            beta1,
+            beta2,
+            scale_m: 1.0 / (1.0 - beta1.powi(t)),
+            scale_v: 1.0 / (1.0 - beta2.powi(t)),
+            lr,
+            eps,
+            l2,
+        };
+        let mut half_sq = 0.0;
+        for (s, g) in self.slots.iter().zip(grads) {
+            half_sq += with_slice_mut::<T, _>(s.var.as_tensor(), |theta| {
+                with_slice_mut::<T, _>(s.m.as_tensor(), |m| {
+                    with_slice_mut::<T, _>(s.v.as_tensor(), |v| Ok(update.run(theta, m, v, g)))
+                })
+            })?;
+        }
+        Ok(half_sq)
     }
 
     /// Copies of the whole state: `adam.m.<var>`, `adam.v.<var>` and `adam.step` (i64 `[1]`).
@@ -359,6 +419,87 @@ impl InplaceOp3 for AdamApply {
         }
         Ok(())
     }
+}
+
+/// Adam's arithmetic as [`Moment`] and [`AdamApply`] do it (same operations in the same
+/// order, so both paths update identically), fused into one pass with g ← g + l2·θ.
+struct FusedUpdate {
+    beta1: f64,
+    beta2: f64,
+    scale_m: f64,
+    scale_v: f64,
+    lr: f64,
+    eps: f64,
+    l2: f64,
+}
+
+impl FusedUpdate {
+    /// Updates θ, m, v in place; returns ½Σθ² of θ before the update (chunk sums in order).
+    fn run<T: Real>(&self, theta: &mut [T], m: &mut [T], v: &mut [T], g: &[T]) -> f64 {
+        let (b1, c1) = (T::of(self.beta1), T::of(1.0 - self.beta1));
+        let (b2, c2) = (T::of(self.beta2), T::of(1.0 - self.beta2));
+        let (sm, sv, lr, eps) = (
+            T::of(self.scale_m),
+            T::of(self.scale_v),
+            T::of(self.lr),
+            T::of(self.eps),
+        );
+        let (l2, with_l2) = (T::of(self.l2), self.l2 != 0.0);
+        let partial: Vec<f64> = theta
+            .par_chunks_mut(CHUNK)
+            .zip(m.par_chunks_mut(CHUNK))
+            .zip(v.par_chunks_mut(CHUNK).zip(g.par_chunks(CHUNK)))
+            .map(|((t, m), (v, g))| {
+                let mut sq = 0.0;
+                for (((t, m), v), &g) in t.iter_mut().zip(m).zip(v).zip(g) {
+                    let tv = t.to_f64();
+                    sq += tv * tv;
+                    let g = if with_l2 { g + *t * l2 } else { g };
+                    *m = *m * b1 + g * c1;
+                    *v = *v * b2 + (g * g) * c2;
+                    *t = *t - (*m * sm) / ((*v * sv).sqrt() + eps) * lr;
+                }
+                sq
+            })
+            .collect();
+        0.5 * partial.iter().sum::<f64>()
+    }
+}
+
+/// Runs `f` on the mutable contiguous data of a CPU tensor of type `T` (in place, through an
+/// [`InplaceOp1`], the one way candle lends its storage mutably).
+fn with_slice_mut<T: Real, R>(t: &Tensor, f: impl FnOnce(&mut [T]) -> Result<R>) -> Result<R> {
+    type Job<'f, T, R> = Box<dyn FnOnce(&mut [T]) -> Result<R> + 'f>;
+    struct Lend<'f, T, R> {
+        f: RefCell<Option<Job<'f, T, R>>>,
+        out: RefCell<Option<Result<R>>>,
+    }
+    impl<T: Real, R> InplaceOp1 for Lend<'_, T, R> {
+        fn name(&self) -> &'static str {
+            "lend-mut"
+        }
+        fn cpu_fwd(&self, s: &mut CpuStorage, l: &Layout) -> candle_core::Result<()> {
+            let Some(data) = T::cpu_mut(s) else {
+                bail!("lend-mut: storage of another dtype");
+            };
+            let data = span_mut("lend-mut", data, l)?;
+            if let Some(f) = self.f.borrow_mut().take() {
+                *self.out.borrow_mut() = Some(f(data));
+            }
+            Ok(())
+        }
+    }
+    let lend = Lend {
+        f: RefCell::new(Some(Box::new(f) as Job<'_, T, R>)),
+        out: RefCell::new(None),
+    };
+    t.inplace_op1(&lend)?;
+    lend.out.into_inner().unwrap_or_else(|| {
+        Err(VaeError::argument(
+            "adam",
+            "the update did not run (not a CPU tensor?)",
+        ))
+    })
 }
 
 #[cfg(test)]

@@ -97,6 +97,10 @@ pub struct ModelConfig {
     pub tie_decoder_convs: bool,
     /// Standard deviation of the normal initialisation of every weight matrix.
     pub init_std: f64,
+    /// The class labels of a conditional VAE, in one-hot order (empty: unconditional). Absent
+    /// from the JSON of an unconditional model, so older model folders read as unconditional.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub labels: Vec<String>,
 }
 
 impl Default for ModelConfig {
@@ -112,6 +116,7 @@ impl Default for ModelConfig {
             last_encoder_linear: true,
             tie_decoder_convs: false,
             init_std: 0.02,
+            labels: Vec::new(),
         }
     }
 }
@@ -158,7 +163,25 @@ impl ModelConfig {
         }
     }
 
-    /// Checks the sizes: K, latent, channels ≥ 1 and a finite, non-negative `init_std`.
+    /// Whether the model is a conditional VAE (it has labels).
+    pub fn is_conditional(&self) -> bool {
+        !self.labels.is_empty()
+    }
+
+    /// This configuration made conditional on the distinct values of `mesh_labels` (one label
+    /// per mesh), in order of first appearance.
+    pub fn conditional_on(self, mesh_labels: &[String]) -> Self {
+        let mut labels: Vec<String> = Vec::new();
+        for l in mesh_labels {
+            if !labels.contains(l) {
+                labels.push(l.clone());
+            }
+        }
+        Self { labels, ..self }
+    }
+
+    /// Checks the sizes: K, latent, channels ≥ 1, a finite, non-negative `init_std`, and
+    /// distinct, non-empty labels.
     pub fn validate(&self) -> Result<()> {
         let positive = [
             ("k", self.k),
@@ -175,6 +198,14 @@ impl ModelConfig {
                 "init_std",
                 format!("{} is not a finite non-negative number", self.init_std),
             ));
+        }
+        for (i, l) in self.labels.iter().enumerate() {
+            if l.trim().is_empty() || self.labels[..i].contains(l) {
+                return Err(VaeError::argument(
+                    "labels",
+                    format!("{l:?} is empty or repeated in {:?}", self.labels),
+                ));
+            }
         }
         Ok(())
     }
@@ -332,5 +363,27 @@ mod tests {
             .is_err()
         );
         assert!(ModelConfig::default().validate().is_ok());
+    }
+
+    #[test]
+    fn labels_are_optional_in_json_and_ordered_by_first_appearance() {
+        // An unconditional model's JSON has no "labels" key, as before labels existed.
+        let plain = ModelConfig::default();
+        let json = serde_json::to_string(&plain).unwrap();
+        assert!(!json.contains("labels"), "{json}");
+        let cond = plain
+            .clone()
+            .conditional_on(&["pose", "gallop", "pose"].map(String::from));
+        assert_eq!(cond.labels, ["pose", "gallop"]);
+        assert!(cond.is_conditional() && !plain.is_conditional());
+        let json = serde_json::to_string(&cond).unwrap();
+        assert!(json.contains("\"labels\":[\"pose\",\"gallop\"]"), "{json}");
+        assert_eq!(serde_json::from_str::<ModelConfig>(&json).unwrap(), cond);
+        let repeated = ModelConfig {
+            labels: vec!["a".into(), "a".into()],
+            ..Default::default()
+        };
+        let err = repeated.validate().unwrap_err().to_string();
+        assert!(err.contains("labels") && err.contains("repeated"), "{err}");
     }
 }

@@ -1,8 +1,9 @@
 //! [`MeshData`]: a mesh set turned into what the network eats — ACAP features of every mesh,
 //! normalised into ±0.95 by ranges fitted on the training split only, and batches of them as
-//! `[B, V, 9]` tensors.
+//! `[B, V, 9]` tensors (with, for a conditional model, each mesh's one-hot label).
 
 use crate::error::{Result, VaeError};
+use crate::model::MeshVae;
 use crate::split::Split;
 use candle_core::{Device, Tensor};
 use deform_features::{CHANNELS, FeatureExtractor, FeatureOptions, FeatureSet, Normalization};
@@ -20,6 +21,8 @@ pub struct MeshData {
     pub split: Split,
     /// Warnings of the feature extraction (degenerate faces and the like).
     pub warnings: Vec<String>,
+    /// Each mesh's label, for a conditional model (see [`Self::with_labels`]).
+    pub labels: Option<Vec<String>>,
 }
 
 impl MeshData {
@@ -56,7 +59,41 @@ impl MeshData {
             normalization,
             split,
             warnings,
+            labels: None,
         }
+    }
+
+    /// Attaches one label per mesh (a conditional model's input).
+    ///
+    /// Errors: not one label per mesh.
+    pub fn with_labels(mut self, labels: Vec<String>) -> Result<Self> {
+        if labels.len() != self.len() {
+            return Err(VaeError::argument(
+                "labels",
+                format!("{} labels for {} meshes", labels.len(), self.len()),
+            ));
+        }
+        self.labels = Some(labels);
+        Ok(self)
+    }
+
+    /// The one-hot labels `[B, L]` of the meshes `indices` if `model` is conditional, `None`
+    /// otherwise (the batch that goes with [`Self::batch`]).
+    ///
+    /// Errors: a conditional model and meshes without labels, an index out of range, a label
+    /// the model does not know.
+    pub fn conditions(&self, model: &MeshVae, indices: &[usize]) -> Result<Option<Tensor>> {
+        if !model.is_conditional() {
+            return Ok(None);
+        }
+        let labels = self.labels.as_ref().ok_or_else(|| {
+            VaeError::argument(
+                "labels",
+                "the model is conditional but the meshes have no labels",
+            )
+        })?;
+        let picked = crate::model::pick_labels(labels, indices)?;
+        Ok(Some(model.one_hot(&picked)?))
     }
 
     pub fn len(&self) -> usize {

@@ -104,9 +104,53 @@ pub struct ModelSpec {
     pub names: Vec<String>,
     /// Where the set was loaded from, if from disk (used by `eval` when no set is given).
     pub source: Option<PathBuf>,
+    /// A conditional model's label of each mesh, in `names` order (what the encoder and the
+    /// decoder are given for that mesh). Absent for unconditional models.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub labels: Option<Vec<String>>,
 }
 
 impl ModelSpec {
+    /// A conditional model has one known label per mesh; an unconditional one has none.
+    pub fn check_labels(&self, dir: &Path) -> Result<()> {
+        let classes = &self.model.labels;
+        match &self.labels {
+            None if classes.is_empty() => Ok(()),
+            None => Err(VaeError::model(
+                dir,
+                "a conditional model without its meshes' labels in config.json",
+            )),
+            Some(_) if classes.is_empty() => Err(VaeError::model(
+                dir,
+                "mesh labels in config.json, but the model is not conditional",
+            )),
+            Some(labels) => {
+                if labels.len() != self.names.len() {
+                    return Err(VaeError::model(
+                        dir,
+                        format!(
+                            "{} mesh labels for {} meshes in config.json",
+                            labels.len(),
+                            self.names.len()
+                        ),
+                    ));
+                }
+                match labels.iter().position(|l| !classes.contains(l)) {
+                    Some(i) => Err(VaeError::model(
+                        dir,
+                        format!(
+                            "mesh {:?} has label {:?}, not one of the model's ({})",
+                            self.names[i],
+                            labels[i],
+                            classes.join(", ")
+                        ),
+                    )),
+                    None => Ok(()),
+                }
+            }
+        }
+    }
+
     /// Checks that `set` has this model's connectivity.
     pub fn check_set(&self, set: &MeshSet, template: &TriMesh, dir: &Path) -> Result<()> {
         if set.vertex_count() != self.vertices || set.faces().len() != self.faces {
@@ -245,6 +289,7 @@ impl TrainedModel {
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let folder = ModelFolder::new(dir);
         let spec = folder.read_spec()?;
+        spec.check_labels(dir)?;
         let hierarchy = Hierarchy::load(&folder.hierarchy())?;
         let normalization: Normalization = folder.read_json(&folder.normalization())?;
         normalization.validate()?;
@@ -285,6 +330,23 @@ impl TrainedModel {
 }
 
 impl TrainedModel {
+    /// A conditional model's label of each mesh of its set (`spec.names` order).
+    pub fn mesh_labels(&self) -> Option<&[String]> {
+        self.spec.labels.as_deref()
+    }
+
+    /// The one-hot labels `[B, L]` of the meshes `ids` of the model's set for a conditional
+    /// model, `None` for an unconditional one: what `MeshVae::encode_cond` and friends take.
+    ///
+    /// Errors: an index out of range.
+    pub fn conditions(&self, ids: &[usize]) -> Result<Option<candle_core::Tensor>> {
+        let Some(labels) = self.mesh_labels() else {
+            return Ok(None);
+        };
+        let picked = crate::model::pick_labels(labels, ids)?;
+        Ok(Some(self.model.one_hot(&picked)?))
+    }
+
     /// Epochs trained so far and the epoch whose weights are loaded, from `log.jsonl`.
     pub fn epochs_trained(&self) -> Result<(usize, usize)> {
         let path = self.folder.log();

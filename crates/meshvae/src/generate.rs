@@ -1,6 +1,10 @@
 //! Random generation (the paper's §4.4): latent vectors z ~ N(0, I) decoded into meshes, each
 //! with its nearest training mesh by average per-vertex Euclidean distance — the paper's check
 //! that the generated shapes are new rather than copies of the training set.
+//!
+//! A conditional model decodes z ~ N(0, I) with the one-hot label the user asks for
+//! ([`TrainedModel::generate_labelled`]); each sample's nearest training mesh then tells, by its
+//! label, whether the sample looks like the meshes of that label ([`Generated::label_share`]).
 
 use crate::error::{Result, VaeError};
 use crate::folder::TrainedModel;
@@ -14,7 +18,8 @@ use rayon::prelude::*;
 /// Latent vectors decoded per network call (bounds memory on large meshes).
 const CHUNK: usize = 16;
 
-/// What to generate. (A class label for a conditional model will be one more field.)
+/// What to generate (a conditional model's label is an argument of
+/// [`TrainedModel::generate_labelled`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GenerateOptions {
     /// Number of samples (at least 1).
@@ -40,6 +45,8 @@ pub struct Neighbour {
     pub distance: f64,
     /// `distance` divided by the bounding-box diagonal of the model's template.
     pub distance_rel: f64,
+    /// Its label: a conditional model's label of that mesh, else the set's, if labelled.
+    pub label: Option<String>,
 }
 
 /// Generated meshes with their latent vectors and nearest training meshes.
@@ -51,13 +58,58 @@ pub struct Generated {
     pub positions: Vec<Vec<[f64; 3]>>,
     /// `nearest[i]`: the training mesh nearest to sample i.
     pub nearest: Vec<Neighbour>,
+    /// The label every sample was decoded with (conditional models).
+    pub label: Option<String>,
+}
+
+impl Generated {
+    /// The share of samples whose nearest training mesh carries the requested label (`None`
+    /// without a label).
+    pub fn label_share(&self) -> Option<f64> {
+        let label = self.label.as_ref()?;
+        let hits = self
+            .nearest
+            .iter()
+            .filter(|n| n.label.as_ref() == Some(label))
+            .count();
+        Some(hits as f64 / self.nearest.len().max(1) as f64)
+    }
 }
 
 impl TrainedModel {
-    /// Meshes decoded (inference mode) from latent vectors, each of the model's latent size.
+    /// Meshes decoded (inference mode) from latent vectors, each of the model's latent size
+    /// (unconditional models).
     ///
     /// Errors: a vector of the wrong length or with non-finite values.
     pub fn decode_latents(&self, latents: &[Vec<f32>]) -> Result<Vec<Vec<[f64; 3]>>> {
+        self.decode_latents_cond(latents, None)
+    }
+
+    /// As [`Self::decode_latents`], with one label vector per latent vector for a conditional
+    /// model (`conditions[i]` has one weight per model label: a one-hot row as
+    /// `MeshVae::one_hot` makes, or a blend of two for an interpolation).
+    ///
+    /// Errors: as [`Self::decode_latents`]; conditions missing for a conditional model, given
+    /// to an unconditional one, or not one row of the label count per latent vector.
+    pub fn decode_latents_cond(
+        &self,
+        latents: &[Vec<f32>],
+        conditions: Option<&[Vec<f32>]>,
+    ) -> Result<Vec<Vec<[f64; 3]>>> {
+        let labels = self.model.labels().len();
+        if let Some(c) = conditions
+            && (c.len() != latents.len() || c.iter().any(|row| row.len() != labels))
+        {
+            return Err(VaeError::argument(
+                "label vectors",
+                format!(
+                    "{} rows for {} latent vectors; each needs {labels} values (one per \
+                         model label)",
+                    c.len(),
+                    latents.len()
+                ),
+            ));
+        }
         let width = self.model.latent();
         for (i, z) in latents.iter().enumerate() {
             if z.len() != width {
@@ -78,11 +130,19 @@ impl TrainedModel {
         }
         let reconstructor = Reconstructor::new(&self.rest()?)?;
         let mut out = Vec::with_capacity(latents.len());
-        for chunk in latents.chunks(CHUNK) {
-            let flat: Vec<f32> = chunk.iter().flatten().copied().collect();
-            let z = Tensor::from_vec(flat, (chunk.len(), width), self.model.device())?
-                .to_dtype(self.model.dtype())?;
-            let y = self.model.decode(&z, Mode::Eval)?;
+        for (k, chunk) in latents.chunks(CHUNK).enumerate() {
+            let matrix = |rows: &[Vec<f32>], width: usize| -> Result<Tensor> {
+                let flat: Vec<f32> = rows.iter().flatten().copied().collect();
+                Ok(
+                    Tensor::from_vec(flat, (rows.len(), width), self.model.device())?
+                        .to_dtype(self.model.dtype())?,
+                )
+            };
+            let z = matrix(chunk, width)?;
+            let c = conditions
+                .map(|c| matrix(&c[k * CHUNK..k * CHUNK + chunk.len()], labels))
+                .transpose()?;
+            let y = self.model.decode_cond(&z, c.as_ref(), Mode::Eval)?;
             out.extend(self.positions_from_output(&reconstructor, &y)?);
         }
         Ok(out)
@@ -124,6 +184,7 @@ impl TrainedModel {
             ));
         }
         let diagonal = self.template.bbox_diagonal();
+        let labels = self.mesh_labels().or(set.labels());
         let centred: Vec<Vec<[f64; 3]>> = candidates
             .par_iter()
             .map(|&i| centre(set.frame(i).iter().map(|p: &Point| p.map(f64::from))))
@@ -148,6 +209,7 @@ impl TrainedModel {
                     } else {
                         0.0
                     },
+                    label: labels.map(|l| l[index].clone()),
                 }
             })
             .collect())
@@ -182,12 +244,88 @@ pub(crate) fn mean_distance(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 /// `options.count` meshes from z ~ N(0, I) (drawn from [`Rng`] with `options.seed`, row by
 /// row), each with its nearest mesh among the model's training meshes of `set`.
 ///
-/// Errors: `count` = 0, a set that is not the model's (connectivity or mesh count).
+/// Errors: `count` = 0, a set that is not the model's (connectivity or mesh count), a
+/// conditional model (it needs [`TrainedModel::generate_labelled`]).
 pub fn generate(
     model: &TrainedModel,
     set: &MeshSet,
     options: &GenerateOptions,
 ) -> Result<Generated> {
+    model.generate_labelled(set, options, None)
+}
+
+impl TrainedModel {
+    /// For a conditional model, the label vectors from mesh `a`'s one-hot label to mesh `b`'s,
+    /// (1 − t)·c_a + t·c_b for each t (what an interpolation decodes with); `None` for an
+    /// unconditional model.
+    ///
+    /// Errors: an index out of range.
+    pub fn conditions_between(
+        &self,
+        a: usize,
+        b: usize,
+        t: &[f64],
+    ) -> Result<Option<Vec<Vec<f32>>>> {
+        let Some(ends) = self.conditions(&[a, b])? else {
+            return Ok(None);
+        };
+        let ends: Vec<Vec<f32>> = ends.to_dtype(candle_core::DType::F32)?.to_vec2()?;
+        Ok(Some(
+            t.iter()
+                .map(|&t| {
+                    ends[0]
+                        .iter()
+                        .zip(&ends[1])
+                        .map(|(&x, &y)| ((1.0 - t) * f64::from(x) + t * f64::from(y)) as f32)
+                        .collect()
+                })
+                .collect(),
+        ))
+    }
+
+    /// As [`generate`], every sample decoded with the one-hot `label` for a conditional model
+    /// (the same seed draws the same z whatever the label).
+    ///
+    /// Errors: as [`generate`]; no label for a conditional model, a label for an unconditional
+    /// one, a label the model does not know (the error lists the known ones).
+    pub fn generate_labelled(
+        &self,
+        set: &MeshSet,
+        options: &GenerateOptions,
+        label: Option<&str>,
+    ) -> Result<Generated> {
+        generate_impl(self, set, options, label)
+    }
+}
+
+fn generate_impl(
+    model: &TrainedModel,
+    set: &MeshSet,
+    options: &GenerateOptions,
+    label: Option<&str>,
+) -> Result<Generated> {
+    let condition = match label {
+        Some(label) => {
+            let classes = model.model.labels();
+            let k = classes
+                .iter()
+                .position(|c| c == label)
+                .ok_or_else(|| crate::model::unknown_label(classes, label))?;
+            let mut row = vec![0f32; classes.len()];
+            row[k] = crate::model::LABEL_SCALE;
+            Some(row)
+        }
+        None if model.model.is_conditional() => {
+            return Err(VaeError::argument(
+                "label",
+                format!(
+                    "the model is conditional: give one of its labels ({})",
+                    model.model.labels().join(", ")
+                ),
+            ));
+        }
+        None => None,
+    };
     if options.count == 0 {
         return Err(VaeError::argument(
             "number of samples",
@@ -203,12 +341,14 @@ pub fn generate(
                 .collect()
         })
         .collect();
-    let positions = model.decode_latents(&latents)?;
+    let conditions = condition.map(|row| vec![row; latents.len()]);
+    let positions = model.decode_latents_cond(&latents, conditions.as_deref())?;
     let nearest = model.nearest_meshes(set, &model.split.train, &positions)?;
     Ok(Generated {
         latents,
         positions,
         nearest,
+        label: label.map(String::from),
     })
 }
 

@@ -32,7 +32,8 @@ impl TrainedModel {
             let x = self
                 .encode_input(&extractor, set, chunk, self.model.device())?
                 .to_dtype(self.model.dtype())?;
-            let mu = self.model.encode(&x, Mode::Eval)?.mu;
+            let c = self.conditions(chunk)?;
+            let mu = self.model.encode_cond(&x, c.as_ref(), Mode::Eval)?.mu;
             out.extend(mu.to_dtype(candle_core::DType::F32)?.to_vec2::<f32>()?);
         }
         Ok(out)
@@ -71,7 +72,9 @@ pub fn interpolate(
                 .collect()
         })
         .collect();
-    let positions = model.decode_latents(&latents)?;
+    // A conditional model's label blends from the first mesh's to the second's.
+    let conditions = model.conditions_between(a, b, &t)?;
+    let positions = model.decode_latents_cond(&latents, conditions.as_deref())?;
     Ok(Interpolation {
         from: a,
         to: b,

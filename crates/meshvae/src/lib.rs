@@ -85,7 +85,7 @@ pub use folder::{ModelFolder, ModelSpec, SplitFile, TrainConfig, TrainedModel};
 pub use generate::{GenerateOptions, Generated, Neighbour, generate};
 pub use interpolate::{Interpolation, interpolate};
 pub use loss::{Loss, LossWeights};
-pub use model::{Encoded, MeshVae, Mode};
+pub use model::{Encoded, Engine, MeshVae, Mode, StepLoss};
 pub use params::{ParamCount, param_count};
 pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
 pub use reconstruct::EvalReport;

@@ -6,10 +6,17 @@
 //! `[B, V_L·C]` (index p·C + c), μ = hW_μ + b_μ, σ = √(2·sigmoid(hW_σ + b_σ)) ∈ (0, √2).
 //! Decoder: h = zW_μᵀ + b_dec (tied to the μ head), reshape `[B, V_L, C]`, the mirrored
 //! convolutions and de-poolings, all ending in tanh, so x̂ ∈ (−1, 1).
+//! A conditional model (labels in its config) also feeds a one-hot label to both heads and to
+//! the decoder's dense layer: see `cond.rs`.
 
+mod cond;
+mod engine;
 mod file;
 mod layers;
 mod vars;
+
+pub(crate) use cond::{LABEL_SCALE, pick as pick_labels, unknown_label};
+pub use engine::{Engine, StepLoss};
 
 use crate::batch_norm::BatchNorm;
 use crate::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
@@ -67,6 +74,8 @@ pub struct MeshVae {
     w_sigma: Tensor,
     b_sigma: Tensor,
     b_dec: Tensor,
+    /// The label weights of a conditional model.
+    label_weights: Option<cond::LabelWeights>,
     /// Where the backward pass sums the dense weights' gradients (see `dense.rs`).
     sink_mu: Arc<GradSink>,
     sink_sigma: Arc<GradSink>,
@@ -108,7 +117,8 @@ impl MeshVae {
         let n_levels = config.pool_levels() + 1;
         let vertex_counts: Vec<usize> = hierarchy.vertex_counts()[..n_levels].to_vec();
         let coarse = vertex_counts[n_levels - 1];
-        let plan = vars::plan(config, coarse);
+        let mut plan = vars::plan(config, coarse);
+        plan.extend(cond::plan(config, coarse * config.channels));
         let (trainable, state) =
             vars::create(&plan, config.init_std, dtype, device, &mut Rng::new(seed))?;
 
@@ -198,7 +208,18 @@ impl MeshVae {
         }
 
         let t = |name: &str| -> Result<Tensor> { Ok(var(&trainable, name)?.as_tensor().clone()) };
+        let label_weights = if config.is_conditional() {
+            let [mu, sigma, dec] = cond::NAMES;
+            Some(cond::LabelWeights {
+                mu: t(mu)?,
+                sigma: t(sigma)?,
+                dec: t(dec)?,
+            })
+        } else {
+            None
+        };
         Ok(Self {
+            label_weights,
             w_mu: t("enc.mu.weight")?,
             b_mu: t("enc.mu.bias")?,
             w_sigma: t("enc.sigma.weight")?,
@@ -278,9 +299,34 @@ impl MeshVae {
         }
     }
 
-    /// μ and σ `[B, latent]` of features x `[B, V, 9]`.
+    /// The labels of a conditional model, in one-hot order (empty for an unconditional one).
+    pub fn labels(&self) -> &[String] {
+        &self.config.labels
+    }
+
+    pub fn is_conditional(&self) -> bool {
+        self.config.is_conditional()
+    }
+
+    /// One-hot rows `[B, L]` (the model's dtype and device) for `labels`, the active entry
+    /// being the label scale (8; see `model/cond.rs`).
+    ///
+    /// Errors: a label the model does not know (naming it and listing the known ones), or any
+    /// label for an unconditional model.
+    pub fn one_hot<S: AsRef<str>>(&self, labels: &[S]) -> Result<Tensor> {
+        cond::one_hot(self.labels(), labels, self.dtype, &self.device)
+    }
+
+    /// μ and σ `[B, latent]` of features x `[B, V, 9]` (unconditional models).
     pub fn encode(&self, x: &Tensor, mode: Mode) -> Result<Encoded> {
+        self.encode_cond(x, None, mode)
+    }
+
+    /// μ and σ `[B, latent]` of features x `[B, V, 9]` with labels c `[B, L]` (one-hot rows;
+    /// `Some` exactly when the model is conditional).
+    pub fn encode_cond(&self, x: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Encoded> {
         self.check_input("MeshVae::encode", x)?;
+        let label = self.check_labels("MeshVae::encode", c, x.dim(0)?)?;
         let batch = x.dim(0)?;
         // Vertex-major inside the network: see `spectral_conv`'s layouts.
         let mut h = x.transpose(0, 1)?.contiguous()?;
@@ -301,20 +347,30 @@ impl MeshVae {
             .transpose(0, 1)?
             .contiguous()?
             .reshape((batch, self.flat_width()))?;
-        let mu = dense(&flat, &self.w_mu, Orientation::Plain, &self.sink_mu)?
+        let mut mu = dense(&flat, &self.w_mu, Orientation::Plain, &self.sink_mu)?
             .broadcast_add(&self.b_mu)?;
-        let s = dense(&flat, &self.w_sigma, Orientation::Plain, &self.sink_sigma)?
+        let mut s = dense(&flat, &self.w_sigma, Orientation::Plain, &self.sink_sigma)?
             .broadcast_add(&self.b_sigma)?;
+        if let Some((c, w)) = label {
+            mu = (mu + c.matmul(&w.mu)?)?;
+            s = (s + c.matmul(&w.sigma)?)?;
+        }
         let sigma = (candle_nn::ops::sigmoid(&s)? * 2.0)?.sqrt()?;
         Ok(Encoded { mu, sigma })
     }
 
-    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]`.
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` (unconditional models).
     pub fn decode(&self, z: &Tensor, mode: Mode) -> Result<Tensor> {
+        self.decode_cond(z, None, mode)
+    }
+
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` and labels c `[B, L]` (`Some` exactly
+    /// when the model is conditional).
+    pub fn decode_cond(&self, z: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Tensor> {
         let batch = self.check_latent("MeshVae::decode", z, None)?;
         let coarse = self.vertex_counts[self.vertex_counts.len() - 1];
         let mut h = self
-            .decoder_fc(z)?
+            .decoder_fc_cond(z, c)?
             .reshape((batch, coarse, self.config.channels))?
             .transpose(0, 1)?
             .contiguous()?;
@@ -338,24 +394,84 @@ impl MeshVae {
     /// x̂ and the posterior for features x `[B, V, 9]` and noise ε `[B, latent]`:
     /// z = μ + σ ⊙ ε.
     pub fn forward(&self, x: &Tensor, eps: &Tensor, mode: Mode) -> Result<(Tensor, Encoded)> {
-        let encoded = self.encode(x, mode)?;
+        self.forward_cond(x, None, eps, mode)
+    }
+
+    /// As [`Self::forward`] with labels c `[B, L]` for both the encoder and the decoder.
+    pub fn forward_cond(
+        &self,
+        x: &Tensor,
+        c: Option<&Tensor>,
+        eps: &Tensor,
+        mode: Mode,
+    ) -> Result<(Tensor, Encoded)> {
+        let encoded = self.encode_cond(x, c, mode)?;
         self.check_latent("MeshVae::forward (eps)", eps, Some(encoded.mu.dim(0)?))?;
         let z = (&encoded.mu + (&encoded.sigma * eps)?)?;
-        Ok((self.decode(&z, mode)?, encoded))
+        Ok((self.decode_cond(&z, c, mode)?, encoded))
     }
 
     /// The deterministic reconstruction decode(μ) in eval mode.
     pub fn reconstruct(&self, x: &Tensor) -> Result<Tensor> {
-        let encoded = self.encode(x, Mode::Eval)?;
-        self.decode(&encoded.mu, Mode::Eval)
+        self.reconstruct_cond(x, None)
     }
 
-    /// The decoder's dense layer: zW_μᵀ + b_dec `[B, V_L·C]`.
+    /// decode(μ(x, c), c) in eval mode.
+    pub fn reconstruct_cond(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        let encoded = self.encode_cond(x, c, Mode::Eval)?;
+        self.decode_cond(&encoded.mu, c, Mode::Eval)
+    }
+
+    /// The decoder's dense layer: zW_μᵀ + b_dec `[B, V_L·C]` (unconditional models).
+    #[cfg_attr(not(test), allow(dead_code))]
     pub(crate) fn decoder_fc(&self, z: &Tensor) -> Result<Tensor> {
-        Ok(
-            dense(z, &self.w_mu, Orientation::Transposed, &self.sink_mu)?
-                .broadcast_add(&self.b_dec)?,
-        )
+        self.decoder_fc_cond(z, None)
+    }
+
+    /// The decoder's dense layer: zW_μᵀ + b_dec (+ c·W_dc for a conditional model).
+    pub(crate) fn decoder_fc_cond(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        let label = self.check_labels("MeshVae::decode", c, z.dim(0)?)?;
+        let h = dense(z, &self.w_mu, Orientation::Transposed, &self.sink_mu)?
+            .broadcast_add(&self.b_dec)?;
+        Ok(match label {
+            Some((c, w)) => (h + c.matmul(&w.dec)?)?,
+            None => h,
+        })
+    }
+
+    /// Checks that labels come exactly with a conditional model, as `[batch, L]` of the model's
+    /// kind, and pairs them with the label weights.
+    fn check_labels<'a>(
+        &'a self,
+        op: &'static str,
+        c: Option<&'a Tensor>,
+        batch: usize,
+    ) -> Result<Option<(&'a Tensor, &'a cond::LabelWeights)>> {
+        match (c, &self.label_weights) {
+            (None, None) => Ok(None),
+            (Some(_), None) => Err(VaeError::argument(
+                "label",
+                format!("{op}: the model is not conditional (it was trained without labels)"),
+            )),
+            (None, Some(_)) => Err(VaeError::argument(
+                "label",
+                format!(
+                    "{op}: the model is conditional on the labels {}; give each mesh's label",
+                    self.labels().join(", ")
+                ),
+            )),
+            (Some(c), Some(w)) => {
+                let l = self.labels().len();
+                if c.dims() != [batch, l] {
+                    return Err(VaeError::shape(
+                        op,
+                        format!("labels of shape {:?}; expected [{batch}, {l}]", c.dims()),
+                    ));
+                }
+                self.check_kind(op, c)?;
+                Ok(Some((c, w)))
+            }
+        }
     }
 
     /// Gradients of `loss` (a scalar computed by this model) for every variable. Use this rather

@@ -23,13 +23,31 @@ pub(crate) trait Real:
     + std::ops::Mul<Output = Self>
     + std::ops::Div<Output = Self>
 {
+    /// candle's name for this type.
+    const DTYPE_OF: candle_core::DType;
     fn to_f64(self) -> f64;
     fn of(x: f64) -> Self;
     fn tanh(self) -> Self;
     fn sqrt(self) -> Self;
+    /// The values of a CPU storage of this type.
+    fn cpu(s: &CpuStorage) -> Option<&[Self]>;
+    fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]>;
 }
 
 impl Real for f32 {
+    const DTYPE_OF: candle_core::DType = candle_core::DType::F32;
+    fn cpu(s: &CpuStorage) -> Option<&[Self]> {
+        match s {
+            CpuStorage::F32(v) => Some(v),
+            _ => None,
+        }
+    }
+    fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]> {
+        match s {
+            CpuStorage::F32(v) => Some(v),
+            _ => None,
+        }
+    }
     fn to_f64(self) -> f64 {
         self as f64
     }
@@ -45,6 +63,19 @@ impl Real for f32 {
 }
 
 impl Real for f64 {
+    const DTYPE_OF: candle_core::DType = candle_core::DType::F64;
+    fn cpu(s: &CpuStorage) -> Option<&[Self]> {
+        match s {
+            CpuStorage::F64(v) => Some(v),
+            _ => None,
+        }
+    }
+    fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]> {
+        match s {
+            CpuStorage::F64(v) => Some(v),
+            _ => None,
+        }
+    }
     fn to_f64(self) -> f64 {
         self
     }

@@ -4,6 +4,10 @@
 //! decoder's dense layer is tied to the μ head, so it adds no weights) plus the convolutions'
 //! matrices (6 × 27·9 for `CCPC` with K = 3); for V₂ = 3,446 that is 7,941,042. Biases, the
 //! decoder's dense bias and batch norm's γ and β are counted in `with_biases` only.
+//!
+//! A conditional model with L labels adds its label weights (see `model/cond.rs`):
+//! L·latent into each head and L·V_L·C into the decoder's dense layer. With L = 0 the count is
+//! the paper's.
 
 use crate::config::{ConvKind, ConvSpec, ModelConfig};
 
@@ -31,6 +35,7 @@ pub fn param_count(config: &ModelConfig, vertex_counts: &[usize]) -> ParamCount 
     }
     let flat = coarse * config.channels;
     weights += 2 * flat * config.latent;
+    weights += config.labels.len() * (2 * config.latent + flat);
     let bn: usize = enc
         .iter()
         .chain(&dec)
@@ -97,5 +102,18 @@ mod tests {
         let w = param_count(&wide, &[100]);
         assert_eq!(w.without_biases, 2 * 27 * 16 + 2 * 1600 * 128);
         assert_eq!(w.with_biases, w.without_biases + 256 + 1600);
+    }
+
+    #[test]
+    fn labels_add_their_weights_only() {
+        let base = ModelConfig::default();
+        let p = param_count(&base, &[100, 50]);
+        let cond = base.conditional_on(&["a", "b", "c"].map(String::from));
+        let q = param_count(&cond, &[100, 50]);
+        assert_eq!(q.without_biases, p.without_biases + 3 * (2 * 128 + 50 * 9));
+        assert_eq!(
+            q.with_biases - q.without_biases,
+            p.with_biases - p.without_biases
+        );
     }
 }

@@ -9,6 +9,11 @@
 //! that write: `resume` restarts from the checkpoint, and because every random draw comes from
 //! one seeded stream saved with it, the resumed run ends with the same weights as an
 //! uninterrupted one.
+//!
+//! A conditional model (`model.labels` non-empty, e.g. from [`ModelConfig::conditional_on`])
+//! trains on the set's labels: every mesh needs one of the model's labels and every label needs
+//! a training mesh. The meshes' labels are saved in `config.json`; the split is drawn as for
+//! any model.
 
 use crate::adam::Adam;
 use crate::checkpoint::{Checkpoint, Progress};
@@ -66,6 +71,9 @@ pub struct TrainOptions {
     /// model (~200 MB on a 42k-vertex mesh) does not stay in memory through the next epochs.
     pub best_in_memory_params: usize,
     pub device: Device,
+    /// Train with the hand-written CPU step ([`crate::Engine`]) whenever it supports the model;
+    /// `false` forces candle's autograd path (the reference).
+    pub engine: bool,
 }
 
 impl Default for TrainOptions {
@@ -77,6 +85,7 @@ impl Default for TrainOptions {
             checkpoint_seconds: 60.0,
             best_in_memory_params: 16 << 20,
             device: Device::Cpu,
+            engine: true,
         }
     }
 }
@@ -164,6 +173,10 @@ pub fn train(
 
     let epochs = spec.train.epochs;
     let batch = spec.train.batch;
+    let mut engine = match options.engine {
+        true => crate::model::Engine::new(&model, batch)?,
+        false => None,
+    };
     let train_ids = &data.split.train;
     let steps_per_epoch = train_ids.len().div_ceil(batch);
     let bar = progress_bar(options.progress, epochs, progress.epoch, steps_per_epoch);
@@ -179,26 +192,51 @@ pub fn train(
         let mut sums = [0.0f64; 4];
         for chunk in order.chunks(batch) {
             let x = data.batch(chunk, device)?;
+            let c = data.conditions(&model, chunk)?;
             let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
-            // The L2 term's gradient is applied by Adam (see `MeshVae::training_loss`).
-            let loss = model.training_loss(&x, &eps, &spec.train.loss)?;
-            let total = loss
-                .total
-                .to_dtype(candle_core::DType::F64)?
-                .to_scalar::<f64>()?
-                + loss.l2;
-            if !total.is_finite() {
+            let diverged = |total: f64, rec: f64, kl: f64, l2: f64| {
                 bar.abandon();
-                return Err(VaeError::Diverged(format!(
-                    "epoch {epoch}: the loss is {total} (rec {}, kl {}, l2 {}); the checkpoint \
-                     of epoch {} is kept — try a smaller learning rate",
-                    loss.rec, loss.kl, loss.l2, progress.epoch
-                )));
-            }
-            let grads = model.backward(&loss.total)?;
-            adam.step_with_l2(&grads, spec.train.loss.l2)?;
+                VaeError::Diverged(format!(
+                    "epoch {epoch}: the loss is {total} (rec {rec}, kl {kl}, l2 {l2}); the \
+                     checkpoint of epoch {} is kept — try a smaller learning rate",
+                    progress.epoch
+                ))
+            };
+            let w_l2 = spec.train.loss.l2;
+            let (total, rec, kl, l2) = match (engine.as_mut(), &c) {
+                (Some(engine), None) => {
+                    let l = engine.forward_backward(&model, &x, &eps, &spec.train.loss)?;
+                    if !(l.rec + l.kl).is_finite() {
+                        let l2 = model.l2_term()?.to_dtype(candle_core::DType::F64)?;
+                        let l2 = l2.to_scalar::<f64>()? * w_l2;
+                        return Err(diverged(l.rec + l.kl + l2, l.rec, l.kl, l2));
+                    }
+                    // Adam also returns the L2 term of the weights it started from.
+                    let l2 = engine.apply_adam(&mut adam, w_l2)?;
+                    let total = l.rec + l.kl + l2;
+                    if !total.is_finite() {
+                        return Err(diverged(total, l.rec, l.kl, l2));
+                    }
+                    (total, l.rec, l.kl, l2)
+                }
+                _ => {
+                    // The L2 term's gradient is applied by Adam (see `MeshVae::training_loss`).
+                    let loss = model.training_loss_cond(&x, c.as_ref(), &eps, &spec.train.loss)?;
+                    let total = loss
+                        .total
+                        .to_dtype(candle_core::DType::F64)?
+                        .to_scalar::<f64>()?
+                        + loss.l2;
+                    if !total.is_finite() {
+                        return Err(diverged(total, loss.rec, loss.kl, loss.l2));
+                    }
+                    let grads = model.backward(&loss.total)?;
+                    adam.step_with_l2(&grads, w_l2)?;
+                    (total, loss.rec, loss.kl, loss.l2)
+                }
+            };
             let w = chunk.len() as f64;
-            for (s, v) in sums.iter_mut().zip([total, loss.rec, loss.kl, loss.l2]) {
+            for (s, v) in sums.iter_mut().zip([total, rec, kl, l2]) {
                 *s += v * w;
             }
             bar.inc(1);
@@ -282,7 +320,8 @@ pub fn validation_loss(
     let mut sum = 0.0;
     for chunk in ids.chunks(batch.max(1)) {
         let x = data.batch(chunk, device)?;
-        sum += model.rec_error(&x, weights)? * chunk.len() as f64;
+        let c = data.conditions(model, chunk)?;
+        sum += model.rec_error_cond(&x, c.as_ref(), weights)? * chunk.len() as f64;
     }
     Ok(Some(sum / ids.len() as f64))
 }
@@ -293,7 +332,6 @@ fn fresh_setup(
     force: bool,
     hierarchy_config: HierarchyConfig,
 ) -> Result<(ModelSpec, Hierarchy, MeshData, TriMesh)> {
-    prepare_out_dir(folder, force)?;
     let set = request.set;
     let split = match &request.split {
         Some(s) => {
@@ -302,9 +340,14 @@ fn fresh_setup(
         }
         None => Split::random(set.len(), request.train.test_fraction, request.train.seed)?,
     };
+    let labels = mesh_labels(&request.model, set, &split)?;
+    prepare_out_dir(folder, force)?;
     let template = set.template();
     let hierarchy = Hierarchy::build(&template, &hierarchy_config)?;
-    let data = MeshData::prepare(set, split, request.features)?;
+    let mut data = MeshData::prepare(set, split, request.features)?;
+    if let Some(labels) = &labels {
+        data = data.with_labels(labels.clone())?;
+    }
     let spec = ModelSpec {
         format: FORMAT.into(),
         version: VERSION,
@@ -316,8 +359,51 @@ fn fresh_setup(
         faces: set.faces().len(),
         names: set.names().to_vec(),
         source: request.source.clone(),
+        labels,
     };
     Ok((spec, hierarchy, data, template))
+}
+
+/// The set's labels for a conditional model (`None` for an unconditional one), checked: every
+/// mesh has one of the model's labels and every label has a training mesh.
+fn mesh_labels(model: &ModelConfig, set: &MeshSet, split: &Split) -> Result<Option<Vec<String>>> {
+    if !model.is_conditional() {
+        return Ok(None);
+    }
+    let known = model.labels.join(", ");
+    let labels = set.labels().ok_or_else(|| {
+        VaeError::argument(
+            "labels",
+            format!(
+                "the model is conditional on {known}, but the mesh set has no labels (give a \
+                 labels file)"
+            ),
+        )
+    })?;
+    if let Some(i) = labels.iter().position(|l| !model.labels.contains(l)) {
+        return Err(VaeError::argument(
+            "labels",
+            format!(
+                "mesh {:?} has label {:?}, not one of the model's ({known})",
+                set.names()[i],
+                labels[i]
+            ),
+        ));
+    }
+    if let Some(missing) = model
+        .labels
+        .iter()
+        .find(|c| !split.train.iter().any(|&i| &labels[i] == *c))
+    {
+        return Err(VaeError::argument(
+            "labels",
+            format!(
+                "no training mesh has label {missing:?} (the split left them all for testing); \
+                 use another seed or training list"
+            ),
+        ));
+    }
+    Ok(Some(labels.to_vec()))
 }
 
 /// The files of a new model folder; the config goes last: a folder without it is not (yet) a
@@ -357,6 +443,9 @@ fn resume_setup(
     if spec.names != request.set.names() {
         differences.push("mesh names");
     }
+    if spec.labels.is_some() && spec.labels.as_deref() != request.set.labels() {
+        differences.push("mesh labels");
+    }
     let (a, b) = (&spec.train, &request.train);
     if (a.batch, a.lr, a.seed, a.loss, a.test_fraction)
         != (b.batch, b.lr, b.seed, b.loss, b.test_fraction)
@@ -385,8 +474,11 @@ fn resume_setup(
     };
     split.check(request.set.len())?;
     let features = deform_features::extract_features(request.set, spec.features)?;
-    let data =
+    let mut data =
         MeshData::with_normalization(features.features, split, normalization, features.warnings);
+    if let Some(labels) = &spec.labels {
+        data = data.with_labels(labels.clone())?;
+    }
     Ok((spec, hierarchy, data))
 }
 

@@ -69,12 +69,28 @@ fn weights_t<T: Real>(
 /// T_1 … T_{K−2} (none for K ≤ 2), channel-major `[V, ci, B]`: what the later sweeps read.
 pub(crate) fn stored_terms<T: Real>(a: &Csr, x: Blocks<'_, T>, s: &ChebShape) -> Vec<Vec<T>> {
     let n = s.batch * s.ci;
-    let mut terms: Vec<Vec<T>> = Vec::new();
+    let mut terms: Vec<Vec<T>> = (1..s.k.saturating_sub(1))
+        .map(|_| scratch::take(s.v * n))
+        .collect();
+    let mut outs: Vec<&mut [T]> = terms.iter_mut().map(|t| t.as_mut_slice()).collect();
+    stored_terms_into(a, x, s, &mut outs);
+    terms
+}
+
+/// [`stored_terms`] into given buffers (`terms[k − 1]` = T_k, each `V·ci·B` long).
+pub(crate) fn stored_terms_into<T: Real>(
+    a: &Csr,
+    x: Blocks<'_, T>,
+    s: &ChebShape,
+    terms: &mut [&mut [T]],
+) {
+    let n = s.batch * s.ci;
     for k in 1..s.k.saturating_sub(1) {
-        let mut out = scratch::take(s.v * n);
+        let (done, rest) = terms.split_at_mut(k - 1);
+        let out = &mut *rest[0];
         let term = |j: usize| match j {
             0 => x,
-            _ => Blocks::channel_major(&terms[j - 1], s.batch, s.ci),
+            _ => Blocks::channel_major(&*done[j - 1], s.batch, s.ci),
         };
         let (src, prev) = (term(k - 1), (k >= 2).then(|| term(k - 2)));
         if n > 0 {
@@ -84,9 +100,7 @@ pub(crate) fn stored_terms<T: Real>(a: &Csr, x: Blocks<'_, T>, s: &ChebShape) ->
                     term_chunk(a, src, prev, s, chunk, out, staging)
                 });
         }
-        terms.push(out);
     }
-    terms
 }
 
 multiversion!(
@@ -140,28 +154,38 @@ pub(crate) fn forward<T: Real>(
     io: Io,
 ) -> (Vec<T>, Vec<Vec<T>>) {
     let terms = stored_terms(a, x, s);
-    let wk = weights_k_major(w, s);
     let mut y = vec![T::ZERO; s.batch * s.v * s.co];
-    let ctx = Ctx {
-        a,
-        x,
-        terms: &terms,
-        s,
-    };
-    chunk_outs(&mut y, io, (s.batch, s.v, s.co))
+    let refs: Vec<&[T]> = terms.iter().map(|t| t.as_slice()).collect();
+    mix_terms(a, x, &refs, w, bias, s, (io, &mut y));
+    (y, terms)
+}
+
+/// The forward's last sweep: T_{K−1} from the stored terms, all K terms mixed into y (layout
+/// `io`).
+pub(crate) fn mix_terms<T: Real>(
+    a: &Csr,
+    x: Blocks<'_, T>,
+    terms: &[&[T]],
+    w: &[T],
+    bias: Option<&[T]>,
+    s: &ChebShape,
+    (io, y): (Io, &mut [T]),
+) {
+    let wk = weights_k_major(w, s);
+    let ctx = Ctx { a, x, terms, s };
+    chunk_outs(y, io, (s.batch, s.v, s.co))
         .into_par_iter()
         .enumerate()
         .for_each_init(Staging::new, |staging, (chunk, dest)| {
             forward_chunk(&ctx, &wk, bias, chunk, dest, staging)
         });
-    (y, terms)
 }
 
 /// What every sweep reads: the operator, x and the stored terms.
 struct Ctx<'a, T> {
     a: &'a Csr,
     x: Blocks<'a, T>,
-    terms: &'a [Vec<T>],
+    terms: &'a [&'a [T]],
     s: &'a ChebShape,
 }
 
@@ -244,7 +268,7 @@ fn forward_rows<T: Real, M: Madd>(
             let (cols, vals) = ctx.a.row::<T>(i0 + li);
             let src = match s.k {
                 2 => ctx.x,
-                _ => Blocks::channel_major(&ctx.terms[s.k - 3], s.batch, s.ci),
+                _ => Blocks::channel_major(ctx.terms[s.k - 3], s.batch, s.ci),
             };
             src.gather::<M>(cols, vals, tmp, last);
             if s.k >= 3 {
@@ -284,25 +308,53 @@ pub(crate) fn backward<T: Real>(
     a: &Csr,
     at: &Csr,
     x: Blocks<'_, T>,
-    terms: &[Vec<T>],
+    terms: &[&[T]],
     w: &[T],
     g: Blocks<'_, T>,
     s: &ChebShape,
     io: Io,
     need: Need,
 ) -> Grads<T> {
-    let k = s.k;
     let size = s.batch * s.v * s.ci;
+    let mut dx = need.x.then(|| vec![T::ZERO; size]);
+    // Sweep 1 writes b_{K−2} into a recycled buffer (K ≥ 3) or, for K ≤ 2, dx itself.
+    let mut work = (need.x && s.k >= 3).then(|| scratch::take(size));
+    let bufs = Bufs {
+        dx: dx.as_deref_mut().map(|d| (io, d)),
+        work: work.as_deref_mut(),
+    };
+    let (dw, db) = backward_into(a, at, x, terms, w, g, s, bufs, need);
+    if let Some(work) = work {
+        scratch::give(work);
+    }
+    Grads { dx, dw, db }
+}
+
+/// Where [`backward_into`] writes dx (and in which layout), and its work buffer for b_{K−2}
+/// (channel-major, `V·ci·B` values; needed when dx is wanted and K ≥ 3).
+pub(crate) struct Bufs<'a, T> {
+    pub dx: Option<(Io, &'a mut [T])>,
+    pub work: Option<&'a mut [T]>,
+}
+
+/// The backward pass into given buffers: dx (if `bufs.dx`), and returns dW `[ci·K, co]` and db
+/// as asked by `need` (`need.x` is ignored: dx is computed iff a buffer is given). The Clenshaw
+/// terms b_1 … b_{K−3} (only for K ≥ 4) come from the recycled buffers of `scratch.rs`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn backward_into<T: Real>(
+    a: &Csr,
+    at: &Csr,
+    x: Blocks<'_, T>,
+    terms: &[&[T]],
+    w: &[T],
+    g: Blocks<'_, T>,
+    s: &ChebShape,
+    bufs: Bufs<'_, T>,
+    need: Need,
+) -> (Option<Vec<T>>, Option<Vec<T>>) {
+    let k = s.k;
     let n_w = k * s.ci * s.co;
-    // Sweep 1 writes b_{K−2} (kept, channel-major) or, for K ≤ 2, dx itself (handed to candle).
     let internal = k >= 3;
-    let mut first = need.x.then(|| {
-        if internal {
-            scratch::take(size)
-        } else {
-            vec![T::ZERO; size]
-        }
-    });
     let w1 = match k {
         1 => weights_t(w, s, (1.0, 0), None),
         _ => {
@@ -312,11 +364,15 @@ pub(crate) fn backward<T: Real>(
             w1
         }
     };
-    let dests = match first.as_deref_mut() {
-        Some(out) => {
-            let out_io = if internal { Io::VertexChannel } else { io };
-            chunk_outs(out, out_io, (s.batch, s.v, s.ci))
-        }
+    let Bufs { dx, work } = bufs;
+    let (mut dx, mut work) = (dx, work);
+    let first: Option<(Io, &mut [T])> = match (internal, dx.as_mut(), work.as_deref_mut()) {
+        (false, Some((io, d)), _) => Some((*io, &mut **d)),
+        (true, Some(_), Some(wb)) => Some((Io::VertexChannel, wb)),
+        _ => None,
+    };
+    let dests = match first {
+        Some((out_io, out)) => chunk_outs(out, out_io, (s.batch, s.v, s.ci)),
         None => (0..s.v.div_ceil(CHUNK_ROWS))
             .map(|_| ChunkOut::Discard)
             .collect(),
@@ -338,58 +394,61 @@ pub(crate) fn backward<T: Real>(
     let db = need
         .b
         .then(|| total[n_w..].iter().map(|&v| T::from_f64(v)).collect());
-    let dx = first.map(|b| {
-        if internal {
-            clenshaw(at, w, g, b, s, io)
-        } else {
-            b
-        }
-    });
-    Grads { dx, dw, db }
+    if let (true, Some((io, d)), Some(wb)) = (internal, dx, work) {
+        clenshaw(at, w, g, wb, s, (io, d));
+    }
+    (dw, db)
 }
 
-/// Clenshaw's recurrence from b_{K−2} (K ≥ 3) down to dx = b_0, in layout `io`.
+/// Clenshaw's recurrence from b_{K−2} (K ≥ 3) down to dx = b_0, written to `dx` (layout `io`).
 fn clenshaw<T: Real>(
     at: &Csr,
     w: &[T],
     g: Blocks<'_, T>,
-    b_first: Vec<T>,
+    b_first: &[T],
     s: &ChebShape,
-    io: Io,
-) -> Vec<T> {
+    (io, dx): (Io, &mut [T]),
+) {
     let size = s.batch * s.v * s.ci;
-    let mut b_next = b_first;
-    let mut b_after: Option<Vec<T>> = None;
+    // chain[j] = b_{K−2−j}: b_{K−2} is the caller's, the later ones recycled buffers.
+    let mut chain: Vec<Vec<T>> = Vec::new();
+    let mut dx = Some(dx);
     for k in (0..=s.k - 3).rev() {
         let alpha = T::from_f64(if k == 0 { 1.0 } else { 2.0 });
-        let mut out = if k > 0 {
-            scratch::take(size)
-        } else {
-            vec![T::ZERO; size]
+        let b = |kk: usize| -> &[T] {
+            if kk == s.k - 2 {
+                b_first
+            } else {
+                &chain[s.k - 3 - kk]
+            }
         };
         // b_{k+2} = b_{K−1} = g W_{K−1}ᵀ was never stored: subtract it through the weights.
         let (wt_k, after) = if k + 2 == s.k - 1 {
             (weights_t(w, s, (1.0, k), Some((-1.0, s.k - 1))), None)
         } else {
-            (weights_t(w, s, (1.0, k), None), b_after.as_deref())
+            (weights_t(w, s, (1.0, k), None), Some(b(k + 2)))
         };
-        let out_io = if k > 0 { Io::VertexChannel } else { io };
-        let next = Blocks::channel_major(&b_next, s.batch, s.ci);
-        chunk_outs(&mut out, out_io, (s.batch, s.v, s.ci))
+        let next = Blocks::channel_major(b(k + 1), s.batch, s.ci);
+        let mut own = (k > 0).then(|| scratch::take(size));
+        let (out_io, out): (Io, &mut [T]) = match own.as_deref_mut() {
+            Some(o) => (Io::VertexChannel, o),
+            None => match dx.take() {
+                Some(d) => (io, d),
+                None => return,
+            },
+        };
+        chunk_outs(out, out_io, (s.batch, s.v, s.ci))
             .into_par_iter()
             .enumerate()
             .for_each_init(Staging::new, |staging, (chunk, dest)| {
                 let step = (alpha, after);
                 clenshaw_chunk(at, g, &wt_k, step, next, s, chunk, dest, staging)
             });
-        if let Some(done) = b_after.replace(std::mem::replace(&mut b_next, out)) {
-            scratch::give(done);
-        }
+        chain.extend(own);
     }
-    if let Some(done) = b_after {
+    for done in chain {
         scratch::give(done);
     }
-    b_next
 }
 
 /// dW from the k-major accumulation order back to the `[ci·K, co]` layout, with

@@ -115,7 +115,7 @@ fn fused_forward_and_adjoint_match_dense_reference_in_every_layout() {
                 w: true,
                 b: true,
             };
-            let grads = backward(&a, &at, xb, &stored, &w, gb, &s, io, all);
+            let grads = backward(&a, &at, xb, &refs(&stored), &w, gb, &s, io, all);
             let (dx, dw, db) = (grads.dx.unwrap(), grads.dw.unwrap(), grads.db.unwrap());
             let dx = {
                 // Back to [B, V, C] for the comparison.
@@ -153,9 +153,13 @@ fn fused_forward_and_adjoint_match_dense_reference_in_every_layout() {
                 w: true,
                 b: false,
             };
-            let part = backward(&a, &at, xb, &stored, &w, gb, &s, io, only_w);
+            let part = backward(&a, &at, xb, &refs(&stored), &w, gb, &s, io, only_w);
             assert!(part.dx.is_none() && part.db.is_none(), "{case}");
             assert_eq!(part.dw.unwrap(), dw, "{case}");
         }
     }
+}
+
+fn refs(v: &[Vec<f64>]) -> Vec<&[f64]> {
+    v.iter().map(|t| t.as_slice()).collect()
 }

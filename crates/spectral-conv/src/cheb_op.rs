@@ -207,17 +207,8 @@ impl ChebOp {
             Some(c) => Blocks::channel_major(c, s.batch, s.co),
             None => Blocks::new(gs, self.io, s.batch, s.co),
         };
-        let grads = cheb_kernel::backward(
-            &self.a,
-            &self.at,
-            xb,
-            saved.terms(),
-            ws,
-            gb,
-            &s,
-            self.io,
-            need,
-        );
+        let terms: Vec<&[T]> = saved.terms().iter().map(|t| t.as_slice()).collect();
+        let grads = cheb_kernel::backward(&self.a, &self.at, xb, &terms, ws, gb, &s, self.io, need);
         if let Some(c) = g_copy {
             scratch::give(c);
         }

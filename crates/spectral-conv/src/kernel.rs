@@ -26,7 +26,7 @@ use std::ops::{Add, AddAssign, Mul, Sub};
 pub(crate) const CHUNK_ROWS: usize = 64;
 
 /// The float types the kernels run on (f32 and f64).
-pub(crate) trait Real:
+pub trait Real:
     Copy
     + Send
     + Sync
@@ -234,7 +234,7 @@ pub(crate) fn baseline_forced() -> bool {
 /// A sparse matrix as the kernels read it: the pattern once, the values in both precisions
 /// (converted once at construction, never per call).
 #[derive(Debug)]
-pub(crate) struct Csr {
+pub struct Csr {
     pub rows: usize,
     pub cols: usize,
     pub indptr: Vec<usize>,

@@ -48,6 +48,7 @@
 //! # Ok(()) }
 //! ```
 
+mod buffers;
 mod cheb;
 mod cheb_kernel;
 #[cfg(test)]
@@ -69,6 +70,7 @@ mod transpose;
 #[cfg(test)]
 mod vertex_major_tests;
 
+pub use buffers::{ChebKernel, ConvDims, Float, SparseKernel};
 pub use cheb::{ChebConfig, ChebConv};
 pub use error::{ConvError, Result};
 pub use mesh_hierarchy::CsrMatrix;

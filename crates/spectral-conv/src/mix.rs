@@ -14,7 +14,7 @@ pub(crate) const LANES: usize = 8;
 
 /// Dimensions of one mixing call: `p` outputs, `batch` lanes per row.
 #[derive(Clone, Copy)]
-pub(crate) struct MixDims {
+pub struct MixDims {
     pub p: usize,
     pub batch: usize,
 }

@@ -145,6 +145,11 @@ impl MaxPool {
         }
     }
 
+    /// The clusters (the pooling matrix's pattern).
+    pub(crate) fn pattern(&self) -> &Csr {
+        &self.pattern
+    }
+
     /// `[B, fine, C]` (or `[fine, C]`) → `[B, coarse, C]` (or `[coarse, C]`).
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         self.forward_with(x, self.backend)

@@ -1,0 +1,253 @@
+//! The engine's element-wise passes on `[V, C, B]` buffers (vertex i, channel c, batch b at
+//! `(i·C + c)·B + b`): layout changes, batch norm fused with tanh, tanh, the squared error.
+//! Reductions sum fixed chunks of vertices in f64 and add the partial sums in chunk order, so
+//! results do not depend on the thread count.
+
+use super::{Scalar, f64_of, of};
+use rayon::prelude::*;
+
+/// Vertices per parallel chunk.
+const CHUNK_V: usize = 256;
+
+/// x `[B, V, C]` → out `[V, C, B]`.
+pub(super) fn to_vcb<T: Scalar>(x: &[T], out: &mut [T], (batch, v, c): (usize, usize, usize)) {
+    let n = c * batch;
+    out.par_chunks_mut(CHUNK_V * n)
+        .enumerate()
+        .for_each(|(chunk, o)| {
+            let i0 = chunk * CHUNK_V;
+            for (li, block) in o.chunks_exact_mut(n).enumerate() {
+                let i = i0 + li;
+                for b in 0..batch {
+                    let row = &x[(b * v + i) * c..][..c];
+                    for (ch, &val) in row.iter().enumerate() {
+                        block[ch * batch + b] = val;
+                    }
+                }
+            }
+        });
+}
+
+/// Per-channel sums of f(value, channel) over a `[V, C, B]` array, chunk partials in order.
+fn channel_sums<T: Scalar>(
+    x: &[T],
+    (c, batch): (usize, usize),
+    f: impl Fn(f64, usize) -> f64 + Sync,
+) -> Vec<f64> {
+    let n = c * batch;
+    let partial: Vec<Vec<f64>> = x
+        .par_chunks(CHUNK_V * n)
+        .map(|rows| {
+            let mut s = vec![0.0; c];
+            for block in rows.chunks_exact(n) {
+                for (ch, run) in block.chunks_exact(batch).enumerate() {
+                    s[ch] += run.iter().map(|&v| f(f64_of(v), ch)).sum::<f64>();
+                }
+            }
+            s
+        })
+        .collect();
+    let mut s = vec![0.0; c];
+    for p in partial {
+        s.iter_mut().zip(p).for_each(|(a, b)| *a += b);
+    }
+    s
+}
+
+/// Per-channel mean and biased variance over vertices and batch (two passes, f64).
+pub(super) fn moments<T: Scalar>(x: &[T], (c, batch): (usize, usize)) -> (Vec<f64>, Vec<f64>) {
+    let count = (x.len() / c.max(1)).max(1) as f64;
+    let mean: Vec<f64> = channel_sums(x, (c, batch), |v, _| v)
+        .iter()
+        .map(|s| s / count)
+        .collect();
+    let var = channel_sums(x, (c, batch), |v, j| (v - mean[j]) * (v - mean[j]))
+        .iter()
+        .map(|s| s / count)
+        .collect();
+    (mean, var)
+}
+
+/// out = [tanh]((x − m)·s·γ + β) per channel, with `inv_std` = s.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn bn_forward<T: Scalar>(
+    x: &[T],
+    out: &mut [T],
+    (mean, inv_std): (&[f64], &[f64]),
+    (gamma, beta): (&[T], &[T]),
+    (c, batch): (usize, usize),
+    tanh: bool,
+) {
+    let n = c * batch;
+    // y = x·a + d per channel, a = γ s, d = β − m γ s (f64, then the float type).
+    let a: Vec<T> = (0..c).map(|j| of(f64_of(gamma[j]) * inv_std[j])).collect();
+    let d: Vec<T> = (0..c)
+        .map(|j| of(f64_of(beta[j]) - mean[j] * f64_of(gamma[j]) * inv_std[j]))
+        .collect();
+    out.par_chunks_mut(CHUNK_V * n)
+        .zip(x.par_chunks(CHUNK_V * n))
+        .for_each(|(o, x)| {
+            for (ob, xb) in o.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
+                for (ch, (orun, xrun)) in ob
+                    .chunks_exact_mut(batch)
+                    .zip(xb.chunks_exact(batch))
+                    .enumerate()
+                {
+                    let (a, d) = (a[ch], d[ch]);
+                    for (o, &x) in orun.iter_mut().zip(xrun) {
+                        let y = x * a + d;
+                        *o = if tanh { crate::ops::Real::tanh(y) } else { y };
+                    }
+                }
+            }
+        });
+}
+
+/// Batch norm's backward pass (batch statistics), through tanh first if `tanh`: `g` holds the
+/// gradient at the output and receives the gradient at the input x; returns (dγ, dβ).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn bn_backward<T: Scalar>(
+    x: &[T],
+    out: &[T],
+    g: &mut [T],
+    (mean, inv_std): (&[f64], &[f64]),
+    gamma: &[T],
+    (c, batch): (usize, usize),
+    tanh: bool,
+) -> (Vec<f64>, Vec<f64>) {
+    let n = c * batch;
+    let count = (x.len() / n.max(1) * batch).max(1) as f64;
+    let ms: Vec<T> = mean.iter().map(|&m| of(m)).collect();
+    let ss: Vec<T> = inv_std.iter().map(|&s| of(s)).collect();
+    let one: T = of(1.0);
+    // Pass 1: g ← g·(1 − out²) and Σ g, Σ g·x̂ per channel.
+    let partial: Vec<Vec<f64>> = g
+        .par_chunks_mut(CHUNK_V * n)
+        .zip(x.par_chunks(CHUNK_V * n).zip(out.par_chunks(CHUNK_V * n)))
+        .map(|(g, (x, o))| {
+            let mut s = vec![0.0; 2 * c];
+            for ((gb, xb), ob) in g
+                .chunks_exact_mut(n)
+                .zip(x.chunks_exact(n))
+                .zip(o.chunks_exact(n))
+            {
+                for ch in 0..c {
+                    let r = ch * batch..(ch + 1) * batch;
+                    let (m, inv) = (ms[ch], ss[ch]);
+                    let (mut sg, mut sgx) = (0.0, 0.0);
+                    for ((gv, &xv), &ov) in gb[r.clone()].iter_mut().zip(&xb[r.clone()]).zip(&ob[r])
+                    {
+                        if tanh {
+                            *gv = *gv * (one - ov * ov);
+                        }
+                        sg += f64_of(*gv);
+                        sgx += f64_of(*gv * ((xv - m) * inv));
+                    }
+                    s[ch] += sg;
+                    s[c + ch] += sgx;
+                }
+            }
+            s
+        })
+        .collect();
+    let mut s = vec![0.0; 2 * c];
+    for p in partial {
+        s.iter_mut().zip(p).for_each(|(a, b)| *a += b);
+    }
+    let (dbeta, dgamma) = (s[..c].to_vec(), s[c..].to_vec());
+    // Pass 2: dx = γ s (g − dβ/N − x̂ dγ/N).
+    let scale: Vec<T> = (0..c).map(|j| of(f64_of(gamma[j]) * inv_std[j])).collect();
+    let mb: Vec<T> = dbeta.iter().map(|&v| of(v / count)).collect();
+    let mg: Vec<T> = dgamma.iter().map(|&v| of(v / count)).collect();
+    g.par_chunks_mut(CHUNK_V * n)
+        .zip(x.par_chunks(CHUNK_V * n))
+        .for_each(|(g, x)| {
+            for (gb, xb) in g.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
+                for ch in 0..c {
+                    let r = ch * batch..(ch + 1) * batch;
+                    let (m, inv, sc, b, gm) = (ms[ch], ss[ch], scale[ch], mb[ch], mg[ch]);
+                    for (gv, &xv) in gb[r.clone()].iter_mut().zip(&xb[r]) {
+                        *gv = sc * (*gv - b - (xv - m) * inv * gm);
+                    }
+                }
+            }
+        });
+    (dgamma, dbeta)
+}
+
+/// x ← tanh(x).
+pub(super) fn tanh_inplace<T: Scalar>(x: &mut [T]) {
+    x.par_chunks_mut(1 << 14)
+        .for_each(|c| c.iter_mut().for_each(|v| *v = crate::ops::Real::tanh(*v)));
+}
+
+/// g ← g·(1 − y²) for the saved tanh output y.
+pub(super) fn tanh_backward<T: Scalar>(y: &[T], g: &mut [T]) {
+    let one: T = of(1.0);
+    g.par_chunks_mut(1 << 14)
+        .zip(y.par_chunks(1 << 14))
+        .for_each(|(g, y)| {
+            for (g, &y) in g.iter_mut().zip(y) {
+                *g = *g * (one - y * y);
+            }
+        });
+}
+
+/// Σ (x̂ − x)² (f64), writing g = coeff·(x̂ − x).
+pub(super) fn sse_grad<T: Scalar>(x_hat: &[T], x: &[T], g: &mut [T], coeff: f64) -> f64 {
+    let k: T = of(coeff);
+    let partial: Vec<f64> = g
+        .par_chunks_mut(1 << 14)
+        .zip(x_hat.par_chunks(1 << 14).zip(x.par_chunks(1 << 14)))
+        .map(|(g, (h, x))| {
+            let mut s = 0.0;
+            for (g, (&h, &x)) in g.iter_mut().zip(h.iter().zip(x)) {
+                let d = h - x;
+                let dd = f64_of(d);
+                s += dd * dd;
+                *g = d * k;
+            }
+            s
+        })
+        .collect();
+    partial.iter().sum()
+}
+
+/// Σ over the batch of a `[K, B]` array: out[k] = Σ_b x[k·B + b].
+pub(super) fn row_sums<T: Scalar>(x: &[T], batch: usize, out: &mut [T]) {
+    out.par_iter_mut()
+        .zip(x.par_chunks(batch.max(1)))
+        .for_each(|(o, row)| {
+            *o = of(row.iter().map(|&v| f64_of(v)).sum::<f64>());
+        });
+}
+
+/// out `[K, B]` += bias[k] on every row.
+pub(super) fn add_row_bias<T: Scalar>(out: &mut [T], bias: &[T], batch: usize) {
+    out.par_chunks_mut(batch.max(1))
+        .zip(bias.par_iter())
+        .for_each(|(row, &b)| row.iter_mut().for_each(|v| *v += b));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_round_trip_and_moments() {
+        let (batch, v, c) = (3, 600, 4);
+        let x: Vec<f64> = (0..batch * v * c)
+            .map(|i| (i as f64 * 0.13).sin() + (i % c) as f64)
+            .collect();
+        let mut vcb = vec![0.0; x.len()];
+        to_vcb(&x, &mut vcb, (batch, v, c));
+        assert_eq!(vcb[(5 * c + 2) * batch + 1], x[(v + 5) * c + 2]);
+        let (mean, var) = moments(&vcb, (c, batch));
+        for ch in 0..c {
+            let vals: Vec<f64> = x.iter().skip(ch).step_by(c).copied().collect();
+            let m = vals.iter().sum::<f64>() / vals.len() as f64;
+            let s = vals.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / vals.len() as f64;
+            assert!((mean[ch] - m).abs() < 1e-12 && (var[ch] - s).abs() < 1e-12);
+        }
+    }
+}

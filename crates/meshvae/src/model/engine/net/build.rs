@@ -1,0 +1,220 @@
+//! Building the engine's network from a model: its layer list and buffers.
+
+use super::{Acts, Bn, Conv, DenseVars, Latent, Net, Node, Pool, PoolOp, internal};
+use crate::config::FEATURE_CHANNELS;
+use crate::error::Result;
+use crate::model::MeshVae;
+use crate::model::engine::{Scalar, of};
+use crate::model::layers::{ConvBlock, Down, Up};
+use crate::structure::Layer;
+use candle_core::Var;
+use spectral_conv::{ChebKernel, SparseKernel};
+
+impl<T: Scalar> Net<T> {
+    /// The network of `model` with buffers for batches of up to `max_batch`.
+    pub fn build(model: &MeshVae, max_batch: usize) -> Result<Self> {
+        let (names, vars): (Vec<String>, Vec<Var>) = model.trainable_vars().into_iter().unzip();
+        let index = |name: &str| -> Result<usize> {
+            names
+                .iter()
+                .position(|n| n == name)
+                .ok_or_else(|| internal(format!("no variable {name}")))
+        };
+        let state = model.state_vars();
+        let state_var = |name: &str| -> Result<Var> {
+            state
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, v)| v.clone())
+                .ok_or_else(|| internal(format!("no state variable {name}")))
+        };
+        let grads = vars.iter().map(|v| vec![of(0.0); v.elem_count()]).collect();
+        let counts = model.vertex_counts().to_vec();
+        let config = model.config();
+        let mut acts = Acts(Vec::new());
+        let mut max_act = 0;
+        let mut add = |acts: &mut Acts<T>, v: usize, c: usize| {
+            max_act = max_act.max(v * c * max_batch);
+            acts.add(v * c * max_batch)
+        };
+        let x_buf = add(&mut acts, counts[0], FEATURE_CHANNELS);
+
+        let conv = |acts: &mut Acts<T>,
+                    add: &mut dyn FnMut(&mut Acts<T>, usize, usize) -> usize,
+                    side: &str,
+                    block: &ConvBlock,
+                    input: usize,
+                    need_dx: bool|
+         -> Result<Node> {
+            let s = block.spec;
+            let v = counts[s.level];
+            let kernel = ChebKernel::new(&model.levels[s.level].op, config.k)?;
+            let terms = acts.add(kernel.terms_len(max_batch, s.c_in));
+            let pre = add(acts, v, s.c_out);
+            let bn = if s.batch_norm {
+                let i = s.index;
+                Some(Bn {
+                    gamma: index(&format!("{side}.bn{i}.gamma"))?,
+                    beta: index(&format!("{side}.bn{i}.beta"))?,
+                    running_mean: state_var(&format!("{side}.bn{i}.running_mean"))?,
+                    running_var: state_var(&format!("{side}.bn{i}.running_var"))?,
+                    mean: Vec::new(),
+                    var: Vec::new(),
+                    inv_std: Vec::new(),
+                })
+            } else {
+                None
+            };
+            let out = if bn.is_some() {
+                add(acts, v, s.c_out)
+            } else {
+                pre
+            };
+            Ok(Node::Conv(Conv {
+                kernel,
+                v,
+                ci: s.c_in,
+                co: s.c_out,
+                weight: index(&format!("{side}.conv{}.weight", s.index))?,
+                bn,
+                tanh: s.tanh,
+                input,
+                terms,
+                pre,
+                out,
+                need_dx,
+            }))
+        };
+
+        let layers = config.structure.layers();
+        let (mut enc, mut dec) = (Vec::new(), Vec::new());
+        let (mut level, mut cur, mut channels) = (0, x_buf, FEATURE_CHANNELS);
+        let mut blocks = model.enc.iter();
+        for layer in layers.iter() {
+            match layer {
+                Layer::Conv => {
+                    let block = blocks.next().ok_or_else(|| internal("encoder plan"))?;
+                    let node = conv(&mut acts, &mut add, "enc", block, cur, !enc.is_empty())?;
+                    channels = block.spec.c_out;
+                    cur = node.out();
+                    enc.push(node);
+                }
+                Layer::Pool => {
+                    let (v_in, v_out) = (counts[level], counts[level + 1]);
+                    let (op, out) = match &model.down[level] {
+                        Down::Identity => (PoolOp::Identity, cur),
+                        Down::Mean(p) => (
+                            PoolOp::Sparse(SparseKernel::new(p.op())),
+                            add(&mut acts, v_out, channels),
+                        ),
+                        Down::Sampling(p) => (
+                            PoolOp::Sparse(SparseKernel::new(p.op())),
+                            add(&mut acts, v_out, channels),
+                        ),
+                        Down::Max(p) => (
+                            PoolOp::Max(p.clone(), vec![0; v_out * channels * max_batch]),
+                            add(&mut acts, v_out, channels),
+                        ),
+                    };
+                    enc.push(Node::Pool(Pool {
+                        op,
+                        v_in,
+                        v_out,
+                        c: channels,
+                        input: cur,
+                        out,
+                    }));
+                    cur = out;
+                    level += 1;
+                }
+            }
+        }
+        let enc_out = cur;
+        let coarse = counts[level];
+        let flat = coarse * channels;
+        let dec_in = add(&mut acts, coarse, channels);
+        cur = dec_in;
+        let mut blocks = model.dec.iter();
+        for layer in layers.iter().rev() {
+            match layer {
+                Layer::Conv => {
+                    let block = blocks.next().ok_or_else(|| internal("decoder plan"))?;
+                    let node = conv(&mut acts, &mut add, "dec", block, cur, true)?;
+                    channels = block.spec.c_out;
+                    cur = node.out();
+                    dec.push(node);
+                }
+                Layer::Pool => {
+                    level -= 1;
+                    let (v_in, v_out) = (counts[level + 1], counts[level]);
+                    let (op, out) = match &model.up[level] {
+                        Up::Identity => (PoolOp::Identity, cur),
+                        Up::DePool(p) => (
+                            PoolOp::Sparse(SparseKernel::new(p.op())),
+                            add(&mut acts, v_out, channels),
+                        ),
+                        Up::Sampling(p) => (
+                            PoolOp::Sparse(SparseKernel::new(p.op())),
+                            add(&mut acts, v_out, channels),
+                        ),
+                    };
+                    dec.push(Node::Pool(Pool {
+                        op,
+                        v_in,
+                        v_out,
+                        c: channels,
+                        input: cur,
+                        out,
+                    }));
+                    cur = out;
+                }
+            }
+        }
+        if channels != FEATURE_CHANNELS || level != 0 {
+            return Err(internal(
+                "the decoder does not end on the template's features",
+            ));
+        }
+        let x_hat = cur;
+        let l = config.latent;
+        let lat_buf = || vec![of(0.0); max_batch * l];
+        let dense = DenseVars {
+            w_mu: index("enc.mu.weight")?,
+            b_mu: index("enc.mu.bias")?,
+            w_sigma: index("enc.sigma.weight")?,
+            b_sigma: index("enc.sigma.bias")?,
+            b_dec: index("dec.fc.bias")?,
+        };
+        Ok(Self {
+            names,
+            vars,
+            grads,
+            max_batch,
+            v0: counts[0],
+            latent: l,
+            flat,
+            enc,
+            dec,
+            dense,
+            acts,
+            x_buf,
+            enc_out,
+            dec_in,
+            x_hat,
+            lat: Latent {
+                mu: lat_buf(),
+                sig: lat_buf(),
+                sigma: lat_buf(),
+                z: lat_buf(),
+                eps: lat_buf(),
+                dz: lat_buf(),
+                dmu: lat_buf(),
+                ds: lat_buf(),
+            },
+            ga: vec![of(0.0); max_act],
+            gb: vec![of(0.0); max_act],
+            work: vec![of(0.0); max_act],
+            batch: 0,
+        })
+    }
+}

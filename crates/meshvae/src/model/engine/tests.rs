@@ -1,0 +1,255 @@
+//! The engine against candle's autograd (the reference): loss terms, every gradient, the batch
+//! norms' running statistics, whole training runs, and bit-reproducibility across thread
+//! counts.
+
+use super::*;
+use crate::config::{ModelConfig, PoolKind};
+use crate::model::Mode;
+use crate::rng::Rng;
+use candle_core::Device;
+use mesh_hierarchy::Hierarchy;
+
+fn hierarchy(config: &ModelConfig) -> Hierarchy {
+    let sphere = qem_simplify::shapes::icosphere(2);
+    Hierarchy::build(&sphere, &config.hierarchy_config()).unwrap()
+}
+
+/// Two identical models (same seed): one for each path, since both move running statistics.
+fn models(config: &ModelConfig, dtype: DType) -> (MeshVae, MeshVae) {
+    let h = hierarchy(config);
+    let m = || MeshVae::with_dtype(config, &h, &Device::Cpu, dtype, 7).unwrap();
+    (m(), m())
+}
+
+fn inputs(model: &MeshVae, batch: usize, seed: u64) -> (Tensor, Tensor) {
+    let mut rng = Rng::new(seed);
+    let v = model.vertex_count();
+    let x: Vec<f64> = rng
+        .normals(batch * v * 9)
+        .into_iter()
+        .map(|x| (0.5 * x).tanh())
+        .collect();
+    let x = Tensor::from_vec(x, (batch, v, 9), &Device::Cpu).unwrap();
+    let eps = rng
+        .normal_tensor((batch, model.latent()), &Device::Cpu)
+        .unwrap();
+    let dtype = model.dtype();
+    (x.to_dtype(dtype).unwrap(), eps.to_dtype(dtype).unwrap())
+}
+
+fn values(t: &Tensor) -> Vec<f64> {
+    t.flatten_all()
+        .unwrap()
+        .to_dtype(DType::F64)
+        .unwrap()
+        .to_vec1()
+        .unwrap()
+}
+
+/// max |a − b| / max(max |b|, floor).
+fn rel_diff(a: &[f64], b: &[f64], floor: f64) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(floor, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+/// One step on both paths; asserts the loss terms, gradients and running stats agree to `tol`.
+fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
+    let (reference, ours) = models(config, dtype);
+    let weights = LossWeights {
+        rec: 40.0,
+        kl: 3.0,
+        l2: 1.0,
+    };
+    let (x, eps) = inputs(&reference, batch, 3);
+    let loss = reference.training_loss(&x, &eps, &weights).unwrap();
+    let grads = reference.backward(&loss.total).unwrap();
+    let mut engine = Engine::new(&ours, batch + 2).unwrap().unwrap();
+    let got = engine.forward_backward(&ours, &x, &eps, &weights).unwrap();
+    let case = format!(
+        "{} {:?} K={} {dtype:?}",
+        config.structure, config.pool, config.k
+    );
+    assert!(
+        (got.rec - loss.rec).abs() <= tol * loss.rec.abs(),
+        "{case}: rec {} vs {}",
+        got.rec,
+        loss.rec
+    );
+    assert!(
+        (got.kl - loss.kl).abs() <= tol * loss.kl.abs().max(1e-3),
+        "{case}: kl {} vs {}",
+        got.kl,
+        loss.kl
+    );
+    let ours_grads = engine.gradients().unwrap();
+    assert_eq!(ours_grads.len(), reference.trainable_vars().len());
+    for ((name, var), (gname, g)) in reference.trainable_vars().iter().zip(&ours_grads) {
+        assert_eq!(name, gname);
+        let want = values(grads.get(var.as_tensor()).unwrap());
+        let d = rel_diff(&values(g), &want, 1e-6);
+        assert!(d <= tol, "{case}: d{name} differs by {d:e} (relative)");
+        assert!(want.iter().any(|v| *v != 0.0), "{case}: d{name} is zero");
+    }
+    for ((name, a), (_, b)) in reference.state_vars().iter().zip(ours.state_vars()) {
+        let d = rel_diff(&values(b.as_tensor()), &values(a.as_tensor()), 1.0);
+        assert!(d <= tol, "{case}: running {name} differs by {d:e}");
+    }
+}
+
+#[test]
+fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
+    let mut configs = Vec::new();
+    for structure in ["CCPC", "CPCPC"] {
+        for pool in PoolKind::ALL {
+            configs.push(ModelConfig {
+                structure: structure.parse().unwrap(),
+                pool,
+                channels: 5,
+                latent: 6,
+                ..Default::default()
+            });
+        }
+    }
+    for k in [1, 2, 4] {
+        configs.push(ModelConfig {
+            k,
+            channels: 4,
+            latent: 5,
+            ..Default::default()
+        });
+    }
+    // The authors' variant (tanh on the last encoder convolution) and no batch norm.
+    configs.push(ModelConfig {
+        last_encoder_linear: false,
+        latent: 5,
+        ..Default::default()
+    });
+    configs.push(ModelConfig {
+        batch_norm: false,
+        structure: "CPC".parse().unwrap(),
+        latent: 5,
+        ..Default::default()
+    });
+    for config in &configs {
+        compare_step(config, DType::F64, 3, 1e-10);
+    }
+}
+
+#[test]
+fn f32_step_is_close_to_candle() {
+    let config = ModelConfig {
+        latent: 16,
+        ..Default::default()
+    };
+    compare_step(&config, DType::F32, 4, 2e-3);
+}
+
+/// Runs `steps` Adam steps on one path; returns the weights.
+fn train(config: &ModelConfig, engine: bool, steps: usize) -> Vec<Vec<f64>> {
+    let (model, _) = models(config, DType::F64);
+    let weights = LossWeights::default();
+    let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
+    let mut e = engine.then(|| Engine::new(&model, 4).unwrap().unwrap());
+    for step in 0..steps {
+        // The last batch is smaller, as at the end of an epoch.
+        let batch = if step + 1 == steps { 3 } else { 4 };
+        let (x, eps) = inputs(&model, batch, 10 + step as u64);
+        match e.as_mut() {
+            Some(e) => {
+                e.forward_backward(&model, &x, &eps, &weights).unwrap();
+                e.apply_adam(&mut adam, weights.l2).unwrap();
+            }
+            None => {
+                let loss = model.training_loss(&x, &eps, &weights).unwrap();
+                let grads = model.backward(&loss.total).unwrap();
+                adam.step_with_l2(&grads, weights.l2).unwrap();
+            }
+        }
+    }
+    let mut out: Vec<Vec<f64>> = model
+        .trainable_vars()
+        .iter()
+        .map(|(_, v)| values(v.as_tensor()))
+        .collect();
+    out.extend(
+        model
+            .state_vars()
+            .iter()
+            .map(|(_, v)| values(v.as_tensor())),
+    );
+    out
+}
+
+#[test]
+fn training_steps_match_candle_and_repeat_bit_for_bit_on_any_thread_count() {
+    let config = ModelConfig {
+        structure: "CPCPC".parse().unwrap(),
+        pool: PoolKind::Max,
+        channels: 4,
+        latent: 6,
+        ..Default::default()
+    };
+    let reference = train(&config, false, 4);
+    let ours = train(&config, true, 4);
+    for (a, b) in ours.iter().zip(&reference) {
+        assert!(rel_diff(a, b, 1e-3) < 1e-9);
+    }
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    let one = pool(1).install(|| train(&config, true, 4));
+    let two = pool(2).install(|| train(&config, true, 4));
+    assert_eq!(one, two);
+    assert_eq!(one, ours);
+}
+
+#[test]
+fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
+    let spatial = ModelConfig {
+        conv: ConvKind::Spatial,
+        latent: 4,
+        ..Default::default()
+    };
+    let (model, _) = models(&spatial, DType::F32);
+    assert!(Engine::unsupported(&model).unwrap().contains("spatial"));
+    assert!(Engine::new(&model, 2).unwrap().is_none());
+    let tied = ModelConfig {
+        tie_decoder_convs: true,
+        latent: 4,
+        ..Default::default()
+    };
+    assert!(
+        Engine::new(&models(&tied, DType::F32).0, 2)
+            .unwrap()
+            .is_none()
+    );
+
+    let config = ModelConfig {
+        latent: 4,
+        ..Default::default()
+    };
+    let (model, _) = models(&config, DType::F64);
+    assert!(Engine::new(&model, 0).is_err());
+    let mut engine = Engine::new(&model, 2).unwrap().unwrap();
+    let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
+    assert!(engine.apply_adam(&mut adam, 1.0).is_err(), "no step yet");
+    let (x, eps) = inputs(&model, 3, 1);
+    let w = LossWeights::default();
+    let err = engine.forward_backward(&model, &x, &eps, &w).unwrap_err();
+    assert!(err.to_string().contains("at most 2"), "{err}");
+    let (x, eps) = inputs(&model, 2, 1);
+    let short = x.narrow(1, 0, 10).unwrap();
+    assert!(engine.forward_backward(&model, &short, &eps, &w).is_err());
+    let wrong = x.to_dtype(DType::F32).unwrap();
+    assert!(engine.forward_backward(&model, &wrong, &eps, &w).is_err());
+    // The model still decodes (the engine left its weights usable).
+    engine.forward_backward(&model, &x, &eps, &w).unwrap();
+    assert!(model.decode(&eps, Mode::Eval).is_ok());
+}

@@ -1,0 +1,315 @@
+//! `cargo xtask reproduce`: trains the paper's ablations on our data sets, several seeds each,
+//! and writes `docs/results.md` with our numbers beside the paper's.
+//!
+//! - [`plan`]: the run table (data sets, columns, protocols) and each run's folder;
+//! - [`run`]: one run — train with resumption, evaluate, record a result JSON;
+//! - [`stats`]: mean ± std over seeds;
+//! - [`table`]: the markdown;
+//! - [`params`]: parameter counts (ours by the paper's formula, Tan et al.'s derived);
+//! - [`paper`]: the paper's numbers.
+//!
+//! Every run is a model folder under the work folder; a finished run leaves
+//! `<column>.result.json` beside it and is skipped next time, an unfinished one is resumed from
+//! its checkpoint, so an interrupted `reproduce` continues where it stopped.
+
+pub mod paper;
+pub mod params;
+pub mod plan;
+pub mod run;
+pub mod stats;
+pub mod table;
+
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use mesh_io::MeshSet;
+use mesh_io::synth::SynthConfig;
+use plan::{Dataset, Protocol, Run, Source};
+use run::RunResult;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What can stop `reproduce`; each names the data set, run or file concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum ReproError {
+    #[error("invalid {arg}: {message}")]
+    Argument { arg: &'static str, message: String },
+    #[error("data set {name}: {message}")]
+    Dataset { name: String, message: String },
+    #[error("run {run}: {source}")]
+    Run {
+        run: String,
+        source: meshvae::VaeError,
+    },
+    #[error("{}: {message}", path.display())]
+    Results { path: PathBuf, message: String },
+}
+
+impl ReproError {
+    pub(crate) fn run(run: &Run, source: meshvae::VaeError) -> Self {
+        Self::Run {
+            run: format!("{} (folder {})", run.name(), run.column.id),
+            source,
+        }
+    }
+
+    pub(crate) fn io(path: &Path, e: impl std::fmt::Display) -> Self {
+        Self::Results {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
+    }
+}
+
+/// Settings of one `reproduce` invocation.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub datasets: Vec<&'static Dataset>,
+    pub epochs: usize,
+    /// Seeds 1..=seeds; each draws its own split.
+    pub seeds: u64,
+    /// Small synthetic set, one checkpoint per run.
+    pub quick: bool,
+    pub protocol: &'static Protocol,
+    /// Folder of the model folders and run results.
+    pub work: PathBuf,
+    /// The markdown file to write.
+    pub results: PathBuf,
+    /// The command line, quoted in the markdown.
+    pub command: String,
+    /// Draw progress bars (on a terminal).
+    pub progress: bool,
+}
+
+impl Options {
+    /// Checks the numbers.
+    pub fn validate(&self) -> Result<(), ReproError> {
+        if self.epochs == 0 {
+            return Err(ReproError::Argument {
+                arg: "--epochs",
+                message: "must be at least 1".into(),
+            });
+        }
+        if self.seeds == 0 {
+            return Err(ReproError::Argument {
+                arg: "--seeds",
+                message: "must be at least 1".into(),
+            });
+        }
+        if self.datasets.is_empty() {
+            return Err(ReproError::Argument {
+                arg: "--dataset",
+                message: "no data set to run".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A loaded data set and what the tables say about it.
+#[derive(Debug, Clone)]
+pub struct LoadedSet {
+    pub dataset: &'static Dataset,
+    pub set: MeshSet,
+    pub source: Option<PathBuf>,
+    /// Bounding-box diagonal of the first mesh (the unit of the relative errors).
+    pub diagonal: f64,
+    /// How it was made, for the markdown.
+    pub description: String,
+}
+
+/// The synthetic set of a quick run (258 vertices, 16 meshes) or of a full one (`meshvae
+/// synth`'s default: 2,498 vertices, 80 meshes).
+pub fn synthetic_config(quick: bool) -> SynthConfig {
+    if quick {
+        SynthConfig {
+            meshes_per_label: 8,
+            rings: 12,
+            segments: 16,
+            cap_rings: 2,
+            ..SynthConfig::default()
+        }
+    } else {
+        SynthConfig::default()
+    }
+}
+
+/// Loads (or generates) a data set.
+pub fn load(dataset: &'static Dataset, quick: bool) -> Result<LoadedSet, ReproError> {
+    let fail = |message: String| ReproError::Dataset {
+        name: dataset.name.into(),
+        message,
+    };
+    let (set, source, how) = match dataset.source {
+        Source::Synthetic => {
+            let config = synthetic_config(quick);
+            let set = mesh_io::synth::generate(&config)
+                .map_err(|e| fail(e.to_string()))?
+                .set;
+            let how = format!(
+                "`mesh_io::synth` bend/twist capsule ({} per label, {} rings × {} segments, {} \
+                 cap rings, seed {:#x})",
+                config.meshes_per_label,
+                config.rings,
+                config.segments,
+                config.cap_rings,
+                config.seed
+            );
+            (set, None, how)
+        }
+        Source::Real => {
+            let dir = mesh_io::datasets::find(dataset.name).ok_or_else(|| {
+                fail("not found (run ../shared/datasets/unpack, or set MESHVAE_DATASETS)".into())
+            })?;
+            let set = mesh_io::load_set(&dir)
+                .map_err(|e| fail(e.to_string()))?
+                .value;
+            let how = format!("`{}`", dir.display());
+            (set, std::fs::canonicalize(&dir).ok(), how)
+        }
+    };
+    let diagonal = mesh_io::bbox_diagonal(set.frame(0));
+    Ok(LoadedSet {
+        dataset,
+        description: how,
+        set,
+        source,
+        diagonal,
+    })
+}
+
+/// The machine, as results.md states it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Machine {
+    pub cores: usize,
+    pub cpu: String,
+}
+
+impl Machine {
+    pub fn this() -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|text| {
+                text.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split(':').nth(1))
+                    .map(|s| s.trim().to_string())
+            })
+            .unwrap_or_else(|| "unknown CPU".into());
+        Self { cores, cpu }
+    }
+}
+
+/// Everything the markdown is made from.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub options: Options,
+    pub sets: Vec<LoadedSet>,
+    pub results: Vec<RunResult>,
+    /// Runs skipped because an earlier invocation finished them.
+    pub reused: usize,
+    pub machine: Machine,
+    /// This invocation, seconds.
+    pub wall_seconds: f64,
+    /// Notes such as data sets skipped in quick mode.
+    pub notes: Vec<String>,
+}
+
+/// Runs every run of `options` (skipping finished ones), then writes the markdown.
+pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, ReproError> {
+    options.validate()?;
+    let started = Instant::now();
+    let seeds: Vec<u64> = (1..=options.seeds).collect();
+    let runs = plan::runs(&options.datasets, options.protocol, options.epochs, &seeds);
+    let multi = MultiProgress::with_draw_target(if options.progress {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    });
+    let runs_bar = multi.add(ProgressBar::new(runs.len() as u64));
+    let epoch_bar = multi.add(ProgressBar::new(options.epochs as u64));
+    if let Ok(style) =
+        ProgressStyle::with_template("runs   {bar:30} {pos}/{len}  {msg}  [{elapsed_precise}]")
+    {
+        runs_bar.set_style(style);
+    }
+    if let Ok(style) =
+        ProgressStyle::with_template("epochs {bar:30} {pos}/{len}  [{eta_precise} left]")
+    {
+        epoch_bar.set_style(style);
+    }
+
+    let checkpoint_seconds = if options.quick { 1e9 } else { 60.0 };
+    let mut sets = Vec::new();
+    let mut results = Vec::new();
+    let mut reused = 0;
+    for &dataset in &options.datasets {
+        let loaded = load(dataset, options.quick)?;
+        for run in runs.iter().filter(|r| r.dataset.name == dataset.name) {
+            runs_bar.set_message(run.name());
+            if let Some(done) = run::finished(run, &options.work)? {
+                reused += 1;
+                results.push(done);
+                runs_bar.inc(1);
+                continue;
+            }
+            epoch_bar.reset();
+            epoch_bar.set_length(run.epochs as u64);
+            let result = run::execute(
+                run,
+                &loaded.set,
+                loaded.source.clone(),
+                &options.work,
+                checkpoint_seconds,
+                |epoch| epoch_bar.set_position(epoch as u64),
+            )?;
+            multi.suspend(|| {
+                println!(
+                    "{}: test RMS {:.5} ({:.3e} of the diagonal), {:.1} s",
+                    run.name(),
+                    result.test_rms,
+                    result.test_rms_rel,
+                    result.train_seconds + result.other_seconds
+                )
+            });
+            results.push(result);
+            runs_bar.inc(1);
+        }
+        sets.push(loaded);
+    }
+    epoch_bar.finish_and_clear();
+    runs_bar.finish_and_clear();
+    if reused > 0 {
+        notes.push(format!(
+            "{reused} of {} runs were finished by an earlier invocation and read from their \
+             result files.",
+            runs.len()
+        ));
+    }
+    let outcome = Outcome {
+        options,
+        sets,
+        results,
+        reused,
+        machine: Machine::this(),
+        wall_seconds: started.elapsed().as_secs_f64(),
+        notes,
+    };
+    write_results(&outcome)?;
+    Ok(outcome)
+}
+
+/// Writes the markdown atomically, keeping the hand-written block of the file it replaces.
+pub fn write_results(outcome: &Outcome) -> Result<(), ReproError> {
+    let path = &outcome.options.results;
+    let kept = match std::fs::read_to_string(path) {
+        Ok(text) => table::hand_written(&text).map(str::to_string),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(ReproError::io(path, e)),
+    };
+    let markdown = table::markdown(outcome, kept.as_deref());
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| ReproError::io(parent, e))?;
+    }
+    mesh_io::atomic::write_bytes_atomic(path, markdown.as_bytes())
+        .map_err(|e| ReproError::io(path, e))
+}

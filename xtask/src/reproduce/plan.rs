@@ -1,0 +1,331 @@
+//! The run table: data sets, columns (network variants) and protocols, and the runs they make.
+//!
+//! A column or a protocol is one entry of [`COLUMNS`] or [`PROTOCOLS`]: the tables, the folder
+//! names and the markdown follow from the entries. A run is one (data set, protocol, epochs,
+//! seed, column); each seed draws its own random half/half split.
+
+use super::paper::AblationColumn;
+use meshvae::{ConvKind, ModelConfig, PoolKind, Structure, TrainConfig};
+use std::path::{Path, PathBuf};
+
+/// Which of the paper's tables a column belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Group {
+    /// The ablation table (pooling and convolution variants, structure `CCPC`).
+    Ablation,
+    /// The structure table (our pooling, other layer strings).
+    Structure,
+}
+
+/// One network variant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Column {
+    /// Folder and JSON name.
+    pub id: &'static str,
+    /// Row label in our tables.
+    pub label: &'static str,
+    pub group: Group,
+    /// The paper's ablation column it reproduces (`None`: not in the paper's table).
+    pub paper: Option<AblationColumn>,
+    pub structure: &'static str,
+    pub conv: ConvKind,
+    pub pool: PoolKind,
+}
+
+impl Column {
+    /// Our method: in both tables, the reference every other column is compared with.
+    pub fn is_ours(&self) -> bool {
+        self.id == OURS
+    }
+
+    /// The model configuration: the paper's defaults with this column's structure, convolution
+    /// and pooling.
+    pub fn model(&self) -> Result<ModelConfig, meshvae::VaeError> {
+        Ok(ModelConfig {
+            structure: self.structure.parse::<Structure>()?,
+            conv: self.conv,
+            pool: self.pool,
+            ..ModelConfig::default()
+        })
+    }
+}
+
+/// The id of our method's column.
+pub const OURS: &str = "ours";
+
+/// Every column, in table order. "Only Spatial Conv." and "Only Spectral Conv." have no
+/// pooling (the paper: "'Only Spectral Conv.' also means 'No Pooling'"; the authors' code's
+/// no-pooling network, `../shared/notes/authors-code.md` §4.5).
+pub const COLUMNS: &[Column] = &[
+    Column {
+        id: "spatial",
+        label: "Only Spatial Conv. (no pooling)",
+        group: Group::Ablation,
+        paper: Some(AblationColumn::SpatialConv),
+        structure: "CCPC",
+        conv: ConvKind::Spatial,
+        pool: PoolKind::None,
+    },
+    Column {
+        id: "no-pool",
+        label: "Only Spectral Conv. (no pooling)",
+        group: Group::Ablation,
+        paper: Some(AblationColumn::SpectralConv),
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::None,
+    },
+    Column {
+        id: "qem",
+        label: "classical QEM, mean pooling",
+        group: Group::Ablation,
+        paper: Some(AblationColumn::ClassicalQem),
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::Qem,
+    },
+    Column {
+        id: "sampling",
+        label: "CoMA mesh sampling",
+        group: Group::Ablation,
+        paper: Some(AblationColumn::MeshSampling),
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::Sampling,
+    },
+    Column {
+        id: "max",
+        label: "modified QEM, max pooling",
+        group: Group::Ablation,
+        paper: None,
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::Max,
+    },
+    Column {
+        id: OURS,
+        label: "**ours** (modified QEM, mean pooling)",
+        group: Group::Ablation,
+        paper: Some(AblationColumn::Ours),
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::Mean,
+    },
+    Column {
+        id: "cpcpc",
+        label: "`CPCPC` (ours, two poolings)",
+        group: Group::Structure,
+        paper: None,
+        structure: "CPCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::Mean,
+    },
+    Column {
+        id: "ccpccpc",
+        label: "`CCPCCPC` (ours, two poolings)",
+        group: Group::Structure,
+        paper: None,
+        structure: "CCPCCPC",
+        conv: ConvKind::Spectral,
+        pool: PoolKind::Mean,
+    },
+];
+
+/// How the reported checkpoint is chosen and what the model may see.
+#[derive(Debug, Clone, Copy)]
+pub struct Protocol {
+    /// Folder name.
+    pub id: &'static str,
+    /// What results.md says about it.
+    pub description: &'static str,
+    /// Adjusts the training settings for the protocol.
+    pub configure: fn(&mut TrainConfig),
+}
+
+fn authors_protocol(_: &mut TrainConfig) {}
+
+/// The protocols, the default first.
+pub const PROTOCOLS: &[Protocol] = &[Protocol {
+    id: "select-on-test",
+    description: "the authors' protocol: the reported weights are those of the epoch with the \
+                  lowest loss on the test meshes (`../shared/notes/authors-code.md` §5.4), so the \
+                  test set takes part in choosing the checkpoint",
+    configure: authors_protocol,
+}];
+
+/// Looks a protocol up by id.
+pub fn protocol(id: &str) -> Option<&'static Protocol> {
+    PROTOCOLS.iter().find(|p| p.id == id)
+}
+
+/// Where a data set's meshes come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// `mesh_io::synth`: small in quick mode, `meshvae synth`'s default otherwise.
+    Synthetic,
+    /// One of `mesh_io::datasets::KNOWN`.
+    Real,
+}
+
+/// A data set `reproduce` knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dataset {
+    pub name: &'static str,
+    pub source: Source,
+}
+
+/// Every data set, in table order.
+pub const DATASETS: &[Dataset] = &[
+    Dataset {
+        name: "horse-gallop",
+        source: Source::Real,
+    },
+    Dataset {
+        name: "samba",
+        source: Source::Real,
+    },
+    Dataset {
+        name: "elephant-gallop",
+        source: Source::Real,
+    },
+    Dataset {
+        name: "synthetic",
+        source: Source::Synthetic,
+    },
+];
+
+/// Looks a data set up by name.
+pub fn dataset(name: &str) -> Option<&'static Dataset> {
+    DATASETS.iter().find(|d| d.name == name)
+}
+
+/// One training run.
+#[derive(Debug, Clone, Copy)]
+pub struct Run {
+    pub dataset: &'static Dataset,
+    pub protocol: &'static Protocol,
+    pub epochs: usize,
+    pub seed: u64,
+    pub column: &'static Column,
+}
+
+impl Run {
+    /// `WORK/<data set>/<protocol>/e<epochs>/seed<seed>`: the runs sharing a split.
+    pub fn seed_dir(&self, work: &Path) -> PathBuf {
+        work.join(self.dataset.name)
+            .join(self.protocol.id)
+            .join(format!("e{}", self.epochs))
+            .join(format!("seed{}", self.seed))
+    }
+
+    /// The model folder.
+    pub fn model_dir(&self, work: &Path) -> PathBuf {
+        self.seed_dir(work).join(self.column.id)
+    }
+
+    /// The small JSON written when the run is finished and evaluated.
+    pub fn result_path(&self, work: &Path) -> PathBuf {
+        self.seed_dir(work)
+            .join(format!("{}.result.json", self.column.id))
+    }
+
+    /// The training settings: the paper's defaults, this run's epochs and seed, the protocol.
+    pub fn train_config(&self) -> TrainConfig {
+        let mut train = TrainConfig {
+            epochs: self.epochs,
+            seed: self.seed,
+            ..TrainConfig::default()
+        };
+        (self.protocol.configure)(&mut train);
+        train
+    }
+
+    /// A short name for progress lines.
+    pub fn name(&self) -> String {
+        format!(
+            "{} seed {} {}",
+            self.dataset.name, self.seed, self.column.id
+        )
+    }
+}
+
+/// Every run of `datasets` × `seeds` × [`COLUMNS`], data set by data set, seed by seed.
+pub fn runs(
+    datasets: &[&'static Dataset],
+    protocol: &'static Protocol,
+    epochs: usize,
+    seeds: &[u64],
+) -> Vec<Run> {
+    let mut out = Vec::new();
+    for &dataset in datasets {
+        for &seed in seeds {
+            for column in COLUMNS {
+                out.push(Run {
+                    dataset,
+                    protocol,
+                    epochs,
+                    seed,
+                    column,
+                });
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn columns_are_unique_and_build_valid_models() {
+        let mut ids: Vec<&str> = COLUMNS.iter().map(|c| c.id).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        assert_eq!(ids.len(), COLUMNS.len());
+        assert_eq!(COLUMNS.iter().filter(|c| c.is_ours()).count(), 1);
+        for c in COLUMNS {
+            let model = c.model().unwrap();
+            model.validate().unwrap();
+            assert_eq!(model.structure.to_string(), c.structure);
+        }
+        // Every paper column except the two issue 10 adds is run.
+        let covered: Vec<AblationColumn> = COLUMNS.iter().filter_map(|c| c.paper).collect();
+        for col in AblationColumn::ALL {
+            let expected = !matches!(
+                col,
+                AblationColumn::UniformSimp | AblationColumn::GraphPooling
+            );
+            assert_eq!(covered.contains(&col), expected, "{col:?}");
+        }
+    }
+
+    #[test]
+    fn runs_and_their_folders() {
+        let horse = dataset("horse-gallop").unwrap();
+        let synth = dataset("synthetic").unwrap();
+        let protocol = &PROTOCOLS[0];
+        let runs = runs(&[synth, horse], protocol, 20, &[1, 2]);
+        assert_eq!(runs.len(), 2 * 2 * COLUMNS.len());
+        assert_eq!(runs[0].dataset.name, "synthetic");
+        assert_eq!(runs.last().unwrap().seed, 2);
+        let r = runs[COLUMNS.len()];
+        assert_eq!(r.seed, 2);
+        let work = Path::new("/w");
+        assert_eq!(
+            r.model_dir(work),
+            Path::new("/w/synthetic/select-on-test/e20/seed2/spatial")
+        );
+        assert_eq!(
+            r.result_path(work),
+            Path::new("/w/synthetic/select-on-test/e20/seed2/spatial.result.json")
+        );
+        let train = r.train_config();
+        assert_eq!((train.epochs, train.seed), (20, 2));
+        assert!(dataset("swing").is_none() && protocol_exists());
+    }
+
+    fn protocol_exists() -> bool {
+        protocol("select-on-test").is_some() && protocol("validation").is_none()
+    }
+}

@@ -1,0 +1,124 @@
+//! `cargo xtask reproduce --quick` end to end, into a temporary folder (never docs/): every run
+//! trains and is evaluated, the markdown has every table, column and data set with finite
+//! numbers, and a second invocation reuses the finished runs and resumes an unfinished one.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use xtask::reproduce::plan::{COLUMNS, PROTOCOLS};
+use xtask::reproduce::run::RunResult;
+
+fn reproduce(work: &Path, results: &Path) -> Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["reproduce", "--quick", "--quiet", "--work"])
+        .arg(work)
+        .arg("--results")
+        .arg(results)
+        .output()
+        .expect("the xtask binary runs");
+    assert!(
+        out.status.success(),
+        "reproduce failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn result(work: &Path, dataset: &str, column: &str) -> RunResult {
+    let path = work
+        .join(dataset)
+        .join(PROTOCOLS[0].id)
+        .join("e2/seed1")
+        .join(format!("{column}.result.json"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+    serde_json::from_str(&text).unwrap()
+}
+
+/// Every decimal number in the markdown's table rows parses to a finite value, and no cell
+/// is NaN or infinite.
+fn assert_finite_tables(md: &str) {
+    for line in md.lines().filter(|l| l.starts_with('|')) {
+        assert!(
+            !line.contains("NaN") && !line.contains("inf"),
+            "non-finite cell: {line}"
+        );
+        for cell in line.split('|').map(str::trim) {
+            let first = cell.split_whitespace().next().unwrap_or("");
+            if first.starts_with(|c: char| c.is_ascii_digit()) && first.contains('.') {
+                let value: f64 = first
+                    .trim_end_matches('%')
+                    .parse()
+                    .unwrap_or_else(|_| panic!("{first:?} in {line}"));
+                assert!(value.is_finite());
+            }
+        }
+    }
+}
+
+#[test]
+fn quick_reproduce_writes_every_table_and_resumes() {
+    let dir = std::env::temp_dir().join(format!("xtask-reproduce-quick-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (work, results) = (dir.join("work"), dir.join("results.md"));
+    let first = reproduce(&work, &results);
+    let stdout = String::from_utf8_lossy(&first.stdout).to_string();
+
+    let horse = mesh_io::datasets::find("horse-gallop").is_some();
+    let datasets: &[&str] = if horse {
+        &["synthetic", "horse-gallop"]
+    } else {
+        &["synthetic"]
+    };
+    let md = std::fs::read_to_string(&results).unwrap();
+    for heading in [
+        "## How these numbers were made",
+        "## In the paper's layout",
+        "## Relative improvements of ours",
+        "## Network structures",
+        "## Parameters",
+        "## Hand-written notes",
+    ] {
+        assert!(md.contains(heading), "missing {heading}");
+    }
+    for dataset in datasets {
+        assert!(
+            md.contains(&format!("## Ablation on {dataset}")),
+            "{dataset}"
+        );
+        assert!(md.contains(&format!("| {dataset} (ours) |")), "{dataset}");
+        for column in COLUMNS {
+            assert!(md.contains(column.label), "column {}", column.id);
+            let r = result(&work, dataset, column.id);
+            assert!(r.is_finite() && r.test_rms > 0.0, "{dataset} {}", column.id);
+            assert_eq!((r.epochs, r.seed), (2, 1));
+        }
+    }
+    assert!(!md.contains("| not run |"), "a run is missing:\n{md}");
+    assert!(md.contains("7,941,042") && md.contains("4,118,706"));
+    assert!(md.contains("129,745,920") && md.contains("68,610,048"));
+    if horse {
+        assert!(md.contains("| Horse (paper) / horse-gallop |"));
+    }
+    assert_finite_tables(&md);
+    assert!(stdout.contains("(0 reused)"), "{stdout}");
+
+    // An unfinished run (model folder without its result) is resumed and re-evaluated to the
+    // same numbers; every other run is read back.
+    let ours = result(&work, "synthetic", "ours");
+    let seed_dir = work
+        .join("synthetic")
+        .join(PROTOCOLS[0].id)
+        .join("e2/seed1");
+    std::fs::remove_file(seed_dir.join("ours.result.json")).unwrap();
+    let second = reproduce(&work, &results);
+    let stdout = String::from_utf8_lossy(&second.stdout);
+    let runs = datasets.len() * COLUMNS.len();
+    assert!(
+        stdout.contains(&format!("{runs} runs ({} reused)", runs - 1)),
+        "{stdout}"
+    );
+    let again = result(&work, "synthetic", "ours");
+    assert_eq!(again.test_rms, ours.test_rms);
+    assert_eq!(again.best_epoch, ours.best_epoch);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
