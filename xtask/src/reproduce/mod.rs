@@ -37,7 +37,8 @@ pub enum ReproError {
     #[error("run {run}: {source}")]
     Run {
         run: String,
-        source: meshvae::VaeError,
+        // Boxed: the library's error is large, and this one travels through every call.
+        source: Box<meshvae::VaeError>,
     },
     #[error("{}: {message}", path.display())]
     Results { path: PathBuf, message: String },
@@ -46,8 +47,8 @@ pub enum ReproError {
 impl ReproError {
     pub(crate) fn run(run: &Run, source: meshvae::VaeError) -> Self {
         Self::Run {
-            run: format!("{} (folder {})", run.name(), run.column.id),
-            source,
+            run: run.name(),
+            source: Box::new(source),
         }
     }
 
