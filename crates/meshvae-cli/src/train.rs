@@ -87,6 +87,10 @@ pub struct TrainArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Train through candle's autograd instead of the hand-written CPU step (slower; the two
+    /// agree to rounding, see `meshvae::Engine`).
+    #[arg(long)]
+    no_engine: bool,
 }
 
 fn parse_weights(s: &str) -> Result<[f64; 3], String> {
@@ -221,6 +225,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         progress: !args.quiet,
         checkpoint_seconds: args.checkpoint_seconds,
         device: Device::Cpu,
+        engine: !args.no_engine,
         ..TrainOptions::default()
     };
     let summary = meshvae::train(&request, &options, |_| {})?;
