@@ -270,7 +270,7 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
         seconds % 60.0
     );
     println!(
-        "  pictures (PNG; any image viewer or web browser): set.png (the {meshes} training \
+        "  pictures (PNG; any image viewer or web browser): set.png (all {meshes} \
          meshes), generated/sheet.png, interpolation/strip.png, embedding/embedding.png, \
          reconstruction/sheet.png"
     );
