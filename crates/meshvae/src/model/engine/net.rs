@@ -302,36 +302,35 @@ impl<T: Scalar> Net<T> {
         0.5 * kl / batch as f64
     }
 
+    /// Back-propagates `ga` through one chain of nodes, last node first, leaving the gradient
+    /// with respect to the chain's input in `ga`.
+    fn backward_chain(&mut self, chain: Chain, w: &[&[T]], batch: usize) -> Result<()> {
+        let nodes = match chain {
+            Chain::Encoder => &mut self.enc,
+            Chain::Decoder => &mut self.dec,
+        };
+        for node in nodes.iter_mut().rev() {
+            let swap = backward_node(
+                node,
+                &self.acts,
+                w,
+                batch,
+                &mut self.grads,
+                [&mut self.ga, &mut self.gb, &mut self.work],
+            )?;
+            if swap {
+                std::mem::swap(&mut self.ga, &mut self.gb);
+            }
+        }
+        Ok(())
+    }
+
     fn backward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) -> Result<()> {
         // `ga` holds ∂L/∂x̂ (written with the loss).
-        for node in self.dec.iter_mut().rev() {
-            let swap = backward_node(
-                node,
-                &self.acts,
-                w,
-                batch,
-                &mut self.grads,
-                [&mut self.ga, &mut self.gb, &mut self.work],
-            )?;
-            if swap {
-                std::mem::swap(&mut self.ga, &mut self.gb);
-            }
-        }
+        self.backward_chain(Chain::Decoder, w, batch)?;
         self.latent_backward(w, batch, weights);
         std::mem::swap(&mut self.ga, &mut self.gb);
-        for node in self.enc.iter_mut().rev() {
-            let swap = backward_node(
-                node,
-                &self.acts,
-                w,
-                batch,
-                &mut self.grads,
-                [&mut self.ga, &mut self.gb, &mut self.work],
-            )?;
-            if swap {
-                std::mem::swap(&mut self.ga, &mut self.gb);
-            }
-        }
+        self.backward_chain(Chain::Encoder, w, batch)?;
         Ok(())
     }
 
@@ -529,6 +528,13 @@ fn forward_node<T: Scalar>(
 
 /// Backward through one node: `g[0]` holds the gradient at its output; the gradient at its
 /// input ends in `g[1]` (returns true: swap them) or, for in-place steps, in `g[0]` (false).
+/// Which node chain [`Net::backward_chain`] walks.
+#[derive(Clone, Copy)]
+enum Chain {
+    Encoder,
+    Decoder,
+}
+
 fn backward_node<T: Scalar>(
     node: &mut Node,
     acts: &Acts<T>,
