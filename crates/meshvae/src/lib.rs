@@ -7,7 +7,11 @@
 //! The pipeline: ACAP features (`deform-features`) → normalisation fitted on the training split
 //! → a [`MeshVae`] whose graph operators come from a `mesh_hierarchy::Hierarchy` (Chebyshev or
 //! spatial convolutions from `spectral-conv`, pooling by edge contraction) → training with
-//! Adam, checkpoints and resumption → evaluation.
+//! Adam, checkpoints and resumption → evaluation. On the CPU, training runs a hand-written
+//! forward + backward over reused buffers ([`Engine`], checked against candle's autograd) when
+//! it supports the model, and candle's autograd otherwise. A conditional model
+//! (`ModelConfig::labels`) also takes each mesh's label (see `model/cond.rs`); generation,
+//! interpolation and embedding work on the trained folder ([`TrainedModel`]).
 //!
 //! The defaults are the paper's network as the authors' code runs it (`CCPC`, Chebyshev K = 3,
 //! 9 channels, latent 128, batch norm, σ = sqrt(2·sigmoid), decoder FC tied to the μ head, loss
