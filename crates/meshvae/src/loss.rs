@@ -95,6 +95,20 @@ impl MeshVae {
         self.loss_cond(x, None, eps, weights)
     }
 
+    /// w_rec · mean SSE and w_kl · KL of one train-mode forward pass, both differentiable.
+    fn weighted_rec_kl(
+        &self,
+        x: &Tensor,
+        c: Option<&Tensor>,
+        eps: &Tensor,
+        weights: &LossWeights,
+    ) -> Result<(Tensor, Tensor)> {
+        let (x_hat, encoded) = self.forward_cond(x, c, eps, Mode::Train)?;
+        let rec = (mean_sse(x, &x_hat)? * weights.rec)?;
+        let kl = (mean_kl(&encoded)? * weights.kl)?;
+        Ok((rec, kl))
+    }
+
     /// As [`Self::loss`] with labels c `[B, L]` (conditional models).
     pub fn loss_cond(
         &self,
@@ -103,9 +117,7 @@ impl MeshVae {
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<Loss> {
-        let (x_hat, encoded) = self.forward_cond(x, c, eps, Mode::Train)?;
-        let rec = (mean_sse(x, &x_hat)? * weights.rec)?;
-        let kl = (mean_kl(&encoded)? * weights.kl)?;
+        let (rec, kl) = self.weighted_rec_kl(x, c, eps, weights)?;
         let l2 = (self.l2_term()? * weights.l2)?;
         let total = ((&rec + &kl)? + &l2)?;
         Ok(Loss {
@@ -133,9 +145,7 @@ impl MeshVae {
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<Loss> {
-        let (x_hat, encoded) = self.forward_cond(x, c, eps, Mode::Train)?;
-        let rec = (mean_sse(x, &x_hat)? * weights.rec)?;
-        let kl = (mean_kl(&encoded)? * weights.kl)?;
+        let (rec, kl) = self.weighted_rec_kl(x, c, eps, weights)?;
         let l2 = if weights.l2 == 0.0 {
             0.0
         } else {
