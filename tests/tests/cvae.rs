@@ -16,10 +16,10 @@ const SAMPLES: usize = 20;
 /// The acceptance threshold.
 const SHARE: f64 = 0.8;
 
-/// Every other mesh of each label trains, the rest test: both labels are in the training
-/// split whatever their sizes (the synthetic set).
+/// Every other mesh of each label trains, the rest validate (choose the checkpoint): both
+/// labels are in the training split whatever their sizes (the synthetic set).
 fn stratified_split(labels: &[String]) -> Split {
-    let (mut train, mut test) = (Vec::new(), Vec::new());
+    let (mut train, mut val) = (Vec::new(), Vec::new());
     let mut seen: Vec<(&String, usize)> = Vec::new();
     for (i, l) in labels.iter().enumerate() {
         let k = match seen.iter_mut().find(|(s, _)| *s == l) {
@@ -35,26 +35,26 @@ fn stratified_split(labels: &[String]) -> Split {
         if k % 2 == 0 {
             train.push(i);
         } else {
-            test.push(i);
+            val.push(i);
         }
     }
-    Split::from_lists(labels.len(), train, test).unwrap()
+    Split::from_three_lists(labels.len(), train, val, Vec::new()).unwrap()
 }
 
 /// horse-gallop + horse-poses with balanced labels: every 4th gallop frame (12) and all 10
-/// poses train; two gallop frames test (only for the loss log). With the natural 48 : 10, or
+/// poses train; two gallop frames validate (choose the checkpoint). With the natural 48 : 10, or
 /// every other mesh of each label (24 : 5), the five poses are too few: samples asked for
 /// `pose` came out as gallop frames (10 %, see docs/benchmarks.md).
 fn balanced_horse_split(labels: &[String]) -> Split {
-    let (mut train, mut test) = (Vec::new(), Vec::new());
+    let (mut train, mut val) = (Vec::new(), Vec::new());
     for (i, l) in labels.iter().enumerate() {
         if l != "gallop" || i % 4 == 0 {
             train.push(i);
-        } else if test.len() < 2 {
-            test.push(i);
+        } else if val.len() < 2 {
+            val.push(i);
         }
     }
-    Split::from_lists(labels.len(), train, test).unwrap()
+    Split::from_three_lists(labels.len(), train, val, Vec::new()).unwrap()
 }
 
 /// Trains a conditional model on `set` (labelled) with `split` and returns, per label, the

@@ -42,7 +42,16 @@ pub fn model_and_set(
     model: &Path,
     set: Option<&PathBuf>,
 ) -> Result<(TrainedModel, MeshSet), CliError> {
-    let trained = TrainedModel::load(model, &Device::Cpu)?;
+    model_and_set_selected(model, set, false)
+}
+
+/// As [`model_and_set`], with the weights selected on the test meshes if `select_on_test`.
+pub fn model_and_set_selected(
+    model: &Path,
+    set: Option<&PathBuf>,
+    select_on_test: bool,
+) -> Result<(TrainedModel, MeshSet), CliError> {
+    let trained = TrainedModel::load_selected(model, &Device::Cpu, select_on_test)?;
     let path = match set {
         Some(p) => p.clone(),
         None => trained.spec.source.clone().ok_or_else(|| {

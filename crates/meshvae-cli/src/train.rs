@@ -1,6 +1,6 @@
 //! `meshvae train`, `meshvae eval`, `meshvae reconstruct`.
 
-use crate::generate::model_and_set;
+use crate::generate::{model_and_set, model_and_set_selected};
 use crate::{CliError, print_warnings};
 use candle_core::Device;
 use deform_features::FeatureOptions;
@@ -59,6 +59,15 @@ pub struct TrainArgs {
     /// A file of test mesh names (one per line).
     #[arg(long, requires = "train_list")]
     test_list: Option<PathBuf>,
+    /// A file of validation mesh names (one per line), with --train-list and --test-list;
+    /// otherwise the validation meshes are drawn from the training ones (--val-fraction).
+    #[arg(long, requires = "train_list")]
+    val_list: Option<PathBuf>,
+    /// Fraction of the training meshes moved to the validation set, whose loss alone chooses
+    /// the best checkpoint (at least one mesh; 0 = choose on the training loss)
+    /// [default: 0.1].
+    #[arg(long)]
+    val_fraction: Option<f64>,
     /// Train a conditional VAE on these labels: a CSV of `file,label` lines, one per mesh
     /// (generate with `meshvae generate --label L`).
     #[arg(long, conflicts_with = "conditional")]
@@ -191,6 +200,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     train.seed = args.seed.unwrap_or(base_train.seed);
     train.batch = args.batch.unwrap_or(base_train.batch);
     train.lr = args.lr.unwrap_or(base_train.lr);
+    train.val_fraction = args.val_fraction.unwrap_or(base_train.val_fraction);
     if let Some([rec, kl, l2]) = args.loss_weights {
         train.loss.rec = rec;
         train.loss.kl = kl;
@@ -201,11 +211,18 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         ..base_hierarchy
     };
     let split = match (&args.train_list, &args.test_list) {
-        (Some(a), Some(b)) => Some(Split::from_names(
-            set.names(),
-            &read_list(a)?,
-            &read_list(b)?,
-        )?),
+        (Some(a), Some(b)) => {
+            let val = match &args.val_list {
+                Some(v) => read_list(v)?,
+                None => Vec::new(),
+            };
+            Some(Split::from_names(
+                set.names(),
+                &read_list(a)?,
+                &val,
+                &read_list(b)?,
+            )?)
+        }
         _ => None,
     };
     let source = std::fs::canonicalize(&args.set).ok();
@@ -230,7 +247,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     };
     let summary = meshvae::train(&request, &options, |_| {})?;
     println!(
-        "trained {} epoch(s) in {:.1} s ({} of {} done); best epoch {} (test loss {:.4})",
+        "trained {} epoch(s) in {:.1} s ({} of {} done); best epoch {} ({} loss {:.4})",
         summary.epochs_run,
         summary.seconds,
         summary
@@ -240,6 +257,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
             .max(summary.best_epoch),
         summary.epochs_total,
         summary.best_epoch,
+        summary.selected_on,
         summary.best_loss
     );
     if !conditional.is_empty() {
@@ -258,13 +276,19 @@ pub struct EvalArgs {
     set: Option<PathBuf>,
     /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
     /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance, params,
-    /// params_without_biases, epochs, best_epoch, vertices, test_meshes, train_meshes).
+    /// params_without_biases, epochs, best_epoch, selected_on, vertices, test_meshes,
+    /// val_meshes, train_meshes).
     #[arg(long)]
     json: bool,
+    /// Report the weights with the lowest TEST loss, as the authors' code chose its checkpoint
+    /// (for comparison only: errors selected on the test meshes are not errors on unseen data).
+    #[arg(long)]
+    select_on_test: bool,
 }
 
 pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
-    let (trained, set) = model_and_set(&args.model, args.set.as_ref())?;
+    let (trained, set) =
+        model_and_set_selected(&args.model, args.set.as_ref(), args.select_on_test)?;
     let report = trained.evaluate(&set, &Device::Cpu)?;
     let epochs = trained.epochs_trained()?;
     let value = serde_json::json!({
@@ -280,8 +304,10 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "params_without_biases": report.params.without_biases,
         "epochs": epochs.0,
         "best_epoch": epochs.1,
+        "selected_on": trained.selected_on.as_str(),
         "vertices": report.vertices,
         "test_meshes": report.test.meshes,
+        "val_meshes": trained.split.val.len(),
         "train_meshes": report.train.meshes,
     });
     if args.json {
@@ -291,6 +317,12 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         return Ok(());
     }
     println!("{}", args.model.display());
+    if trained.selected_on == meshvae::Selection::Test {
+        println!(
+            "  SELECTED ON TEST: these weights had the lowest loss on the test meshes (the \
+             authors' protocol); the test errors below are not errors on unseen data"
+        );
+    }
     println!(
         "  test RMS     {:.6} ({:.4} ×1000, {:.3e} of the bbox diagonal) over {} meshes",
         report.test.rms, report.test.rms_x1000, report.test.rms_rel, report.test.meshes
@@ -308,8 +340,11 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         report.params.with_biases, report.params.without_biases
     );
     println!(
-        "  epochs       {} (weights of epoch {})",
-        epochs.0, epochs.1
+        "  epochs       {} (weights of epoch {}, chosen on the {} loss; {} validation meshes)",
+        epochs.0,
+        epochs.1,
+        trained.selected_on,
+        trained.split.val.len()
     );
     Ok(())
 }

@@ -68,10 +68,30 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         "params",
         "epochs",
         "vertices",
+        "selected_on",
+        "val_meshes",
     ] {
         assert!(v.get(key).is_some(), "eval --json lacks {key}: {json}");
     }
     assert_eq!(v["epochs"], 3);
+    // 8 meshes: 4 test, 4 training of which one validates and chooses the weights.
+    assert_eq!(
+        (v["selected_on"].as_str(), v["val_meshes"].as_u64()),
+        (Some("validation"), Some(1))
+    );
+    assert_eq!(v["train_meshes"], 3);
+    let text = ok(&meshvae(&["eval", s(&model)]));
+    assert!(
+        text.contains("chosen on the validation loss; 1 validation meshes")
+            && !text.contains("SELECTED ON TEST"),
+        "{text}"
+    );
+    // The authors' protocol on request, labelled as such.
+    let text = ok(&meshvae(&["eval", s(&model), "--select-on-test"]));
+    assert!(text.contains("SELECTED ON TEST"), "{text}");
+    let json = ok(&meshvae(&["eval", s(&model), "--select-on-test", "--json"]));
+    let on_test: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(on_test["selected_on"], "test");
     assert_eq!(v["vertices"], 2498);
     assert!(v["test_rms"].as_f64().unwrap() > 0.0);
 

@@ -1,7 +1,7 @@
 //! [`Checkpoint`]: the whole training state after an epoch, in one safetensors file, so that an
 //! interrupted run resumes exactly where the last finished epoch left it: the model's trainable
 //! and batch-norm tensors (`model.*`), Adam's moments and step (`adam.*`), and the epoch, random
-//! state and best test loss so far (`meta.*`). One file, written atomically: a kill at any
+//! state and best validation and test losses so far (`meta.*`). One file, written atomically: a kill at any
 //! moment leaves either the previous checkpoint or the new one.
 
 use crate::adam::Adam;
@@ -18,9 +18,13 @@ pub struct Progress {
     pub epoch: usize,
     /// State of the training random stream after `epoch`.
     pub rng: [u64; 4],
-    /// Lowest test loss so far and its epoch (infinite and 0 before any).
+    /// Lowest loss so far on the meshes that choose the best weights (validation, or training
+    /// without validation meshes) and its epoch (infinite and 0 before any).
     pub best_loss: f64,
     pub best_epoch: usize,
+    /// Lowest test loss so far and its epoch (for the weights selected on test).
+    pub best_test_loss: f64,
+    pub best_test_epoch: usize,
 }
 
 pub struct Checkpoint;
@@ -45,11 +49,18 @@ impl Checkpoint {
         map.insert("meta.rng".into(), Tensor::new(words.as_slice(), &cpu)?);
         map.insert(
             "meta.epoch".into(),
-            Tensor::new(&[progress.epoch as i64, progress.best_epoch as i64], &cpu)?,
+            Tensor::new(
+                &[
+                    progress.epoch as i64,
+                    progress.best_epoch as i64,
+                    progress.best_test_epoch as i64,
+                ],
+                &cpu,
+            )?,
         );
         map.insert(
             "meta.best_loss".into(),
-            Tensor::new(&[progress.best_loss], &cpu)?,
+            Tensor::new(&[progress.best_loss, progress.best_test_loss], &cpu)?,
         );
         save_atomic(path, &map)
     }
@@ -71,11 +82,15 @@ impl Checkpoint {
         let words: Vec<u32> = get("meta.rng")?.to_dtype(DType::U32)?.to_vec1()?;
         let epochs: Vec<i64> = get("meta.epoch")?.to_vec1()?;
         let best: Vec<f64> = get("meta.best_loss")?.to_vec1()?;
-        let (8, &[epoch, best_epoch], &[best_loss]) =
+        // Checkpoints written before the test-selected weights existed have two epochs and
+        // one loss.
+        let (8, &[epoch, best_epoch, ref test_epoch @ ..], &[best_loss, ref test_loss @ ..]) =
             (words.len(), epochs.as_slice(), best.as_slice())
         else {
             return Err(VaeError::model(path, "malformed meta tensors"));
         };
+        let best_test_epoch = test_epoch.first().copied().unwrap_or(0);
+        let best_test_loss = test_loss.first().copied().unwrap_or(f64::INFINITY);
         let mut rng = [0u64; 4];
         for (r, pair) in rng.iter_mut().zip(words.chunks_exact(2)) {
             *r = ((pair[0] as u64) << 32) | pair[1] as u64;
@@ -85,6 +100,8 @@ impl Checkpoint {
             rng,
             best_loss,
             best_epoch: best_epoch.max(0) as usize,
+            best_test_loss,
+            best_test_epoch: best_test_epoch.max(0) as usize,
         })
     }
 

@@ -18,7 +18,7 @@ use crate::config::ModelConfig;
 use crate::error::{Result, VaeError};
 use crate::loss::LossWeights;
 use crate::model::MeshVae;
-use crate::split::Split;
+use crate::split::{Selection, Split};
 use candle_core::Device;
 use deform_features::{FeatureOptions, Normalization};
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
@@ -45,6 +45,11 @@ pub struct TrainConfig {
     pub loss: LossWeights,
     /// Fraction of the set held out for testing when no lists are given (0.5).
     pub test_fraction: f64,
+    /// Fraction of the training meshes moved to the validation set that chooses the best
+    /// checkpoint (0.1; at least one mesh). 0 chooses on the training loss. Models saved before
+    /// validation sets existed read as 0.
+    #[serde(default)]
+    pub val_fraction: f64,
 }
 
 impl Default for TrainConfig {
@@ -56,6 +61,7 @@ impl Default for TrainConfig {
             seed: 1,
             loss: LossWeights::default(),
             test_fraction: 0.5,
+            val_fraction: 0.1,
         }
     }
 }
@@ -72,6 +78,12 @@ impl TrainConfig {
             return Err(VaeError::argument(
                 "lr",
                 format!("{} is not positive", self.lr),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.val_fraction) {
+            return Err(VaeError::argument(
+                "val_fraction",
+                format!("{} is not in [0, 1)", self.val_fraction),
             ));
         }
         let w = self.loss;
@@ -204,6 +216,11 @@ impl ModelFolder {
     pub fn weights(&self) -> PathBuf {
         self.dir.join("weights.safetensors")
     }
+    /// The weights with the lowest TEST loss, kept only to compare with the authors' protocol
+    /// (`meshvae eval --select-on-test`).
+    pub fn weights_selected_on_test(&self) -> PathBuf {
+        self.dir.join("weights-selected-on-test.safetensors")
+    }
     pub fn checkpoint(&self) -> PathBuf {
         self.dir.join("checkpoint.safetensors")
     }
@@ -255,9 +272,21 @@ impl ModelFolder {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SplitFile {
     pub train: Vec<usize>,
+    #[serde(default)]
+    pub val: Vec<usize>,
     pub test: Vec<usize>,
     pub train_names: Vec<String>,
+    #[serde(default)]
+    pub val_names: Vec<String>,
     pub test_names: Vec<String>,
+    /// Which loss chose `weights.safetensors` (models saved before validation sets existed
+    /// chose on the test meshes).
+    #[serde(default = "legacy_selection")]
+    pub selected_on: Selection,
+}
+
+fn legacy_selection() -> Selection {
+    Selection::Test
 }
 
 impl SplitFile {
@@ -265,9 +294,21 @@ impl SplitFile {
         let pick = |idx: &[usize]| idx.iter().map(|&i| names[i].clone()).collect();
         Self {
             train: split.train.clone(),
+            val: split.val.clone(),
             test: split.test.clone(),
             train_names: pick(&split.train),
+            val_names: pick(&split.val),
             test_names: pick(&split.test),
+            selected_on: split.selection(),
+        }
+    }
+
+    /// The split it records.
+    pub fn split(&self) -> Split {
+        Split {
+            train: self.train.clone(),
+            val: self.val.clone(),
+            test: self.test.clone(),
         }
     }
 }
@@ -282,11 +323,23 @@ pub struct TrainedModel {
     pub normalization: Normalization,
     pub split: Split,
     pub template: TriMesh,
+    /// Which loss chose the loaded weights.
+    pub selected_on: Selection,
 }
 
 impl TrainedModel {
-    /// Loads `dir` (the best weights, or the last checkpoint's if no best was saved yet).
+    /// Loads `dir` with its best weights (chosen on the validation meshes, or as recorded in
+    /// its split file), or the last checkpoint's if no best was saved yet.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        Self::load_selected(dir, device, false)
+    }
+
+    /// As [`Self::load`]; with `select_on_test`, the weights with the lowest test loss instead
+    /// (the authors' protocol, for comparison only: those errors are not on unseen data).
+    ///
+    /// Errors: `select_on_test` and a model without such weights (no test meshes, or trained
+    /// before they were kept).
+    pub fn load_selected(dir: &Path, device: &Device, select_on_test: bool) -> Result<Self> {
         let folder = ModelFolder::new(dir);
         let spec = folder.read_spec()?;
         spec.check_labels(dir)?;
@@ -294,10 +347,7 @@ impl TrainedModel {
         let normalization: Normalization = folder.read_json(&folder.normalization())?;
         normalization.validate()?;
         let split_file: SplitFile = folder.read_json(&folder.split())?;
-        let split = Split {
-            train: split_file.train,
-            test: split_file.test,
-        };
+        let split = split_file.split();
         split
             .check(spec.names.len())
             .map_err(|e| VaeError::model(folder.split(), e.to_string()))?;
@@ -312,7 +362,19 @@ impl TrainedModel {
         }
         let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
         let weights = folder.weights();
-        if weights.is_file() {
+        let mut selected_on = split_file.selected_on;
+        if select_on_test && selected_on != Selection::Test {
+            let on_test = folder.weights_selected_on_test();
+            if !on_test.is_file() {
+                return Err(VaeError::model(
+                    dir,
+                    "no weights selected on the test meshes (the model has no test meshes, or \
+                     predates --select-on-test)",
+                ));
+            }
+            model.load(&on_test)?;
+            selected_on = Selection::Test;
+        } else if weights.is_file() {
             model.load(&weights)?;
         } else {
             crate::checkpoint::Checkpoint::load_model_only(&folder.checkpoint(), &mut model)?;
@@ -325,6 +387,7 @@ impl TrainedModel {
             normalization,
             split,
             template,
+            selected_on,
         })
     }
 }
@@ -358,8 +421,8 @@ impl TrainedModel {
         let best = log
             .iter()
             .min_by(|a, b| {
-                let score = |r: &crate::train::EpochRecord| r.test_loss.unwrap_or(r.train_loss);
-                score(a).total_cmp(&score(b))
+                a.score(self.selected_on)
+                    .total_cmp(&b.score(self.selected_on))
             })
             .map_or(0, |r| r.epoch);
         Ok((last, best))

@@ -94,7 +94,7 @@ pub use params::{ParamCount, param_count};
 pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
 pub use reconstruct::EvalReport;
 pub use rng::Rng;
-pub use split::{Split, resolve_mesh};
+pub use split::{Selection, Split, resolve_mesh};
 pub use structure::{Layer, Structure};
 pub use train::{
     EpochRecord, TrainOptions, TrainRequest, TrainSummary, hierarchy_config, read_log, train,

@@ -1,11 +1,15 @@
 //! Training: a mesh set in, a model folder out (see [`crate::folder`]).
 //!
-//! Each epoch shuffles the training meshes, takes Adam steps on batches, measures the test loss
-//! (the authors' validation loss: w_rec · mean squared error with z = μ and batch norm in
-//! inference mode, here a true mean over the test meshes) and appends a line to `log.jsonl`.
-//! Every [`TrainOptions::checkpoint_seconds`] (and after the last epoch) it writes the weights
-//! with the lowest test loss so far to `weights.safetensors` and the whole state to
-//! `checkpoint.safetensors`. Killing the process at any moment loses at most the epochs since
+//! Each epoch shuffles the training meshes, takes Adam steps on batches, measures the
+//! validation and test losses (the authors' validation loss: w_rec · mean squared error with
+//! z = μ and batch norm in inference mode, here a true mean over the meshes) and appends a line
+//! to `log.jsonl`. Every [`TrainOptions::checkpoint_seconds`] (and after the last epoch) it
+//! writes the weights with the lowest validation loss so far (the training loss without
+//! validation meshes) to `weights.safetensors`, and the whole state to
+//! `checkpoint.safetensors`. The test loss is only logged, and chooses a second set of weights,
+//! `weights-selected-on-test.safetensors`, kept for comparison with the authors' protocol (they
+//! picked their checkpoint on the test half); measuring it changes nothing else, so no test
+//! mesh influences the model or its checkpoint. Killing the process at any moment loses at most the epochs since
 //! that write: `resume` restarts from the checkpoint, and because every random draw comes from
 //! one seeded stream saved with it, the resumed run ends with the same weights as an
 //! uninterrupted one.
@@ -24,7 +28,7 @@ use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, TrainConfig, VERS
 use crate::loss::LossWeights;
 use crate::model::MeshVae;
 use crate::rng::Rng;
-use crate::split::Split;
+use crate::split::{Selection, Split};
 use candle_core::Device;
 use deform_features::FeatureOptions;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -99,9 +103,24 @@ pub struct EpochRecord {
     pub rec: f64,
     pub kl: f64,
     pub l2: f64,
-    /// Validation loss on the test meshes (none if the split has no test meshes).
+    /// Validation loss on the validation meshes (none if the split has none).
+    #[serde(default)]
+    pub val_loss: Option<f64>,
+    /// The same loss on the test meshes (none if the split has none).
     pub test_loss: Option<f64>,
     pub seconds: f64,
+}
+
+impl EpochRecord {
+    /// The loss `selection` ranks epochs by (the training loss where that one is missing).
+    pub fn score(&self, selection: Selection) -> f64 {
+        match selection {
+            Selection::Validation => self.val_loss,
+            Selection::Train => None,
+            Selection::Test => self.test_loss,
+        }
+        .unwrap_or(self.train_loss)
+    }
 }
 
 /// The outcome of [`train`].
@@ -112,7 +131,9 @@ pub struct TrainSummary {
     pub epochs_total: usize,
     pub last: Option<EpochRecord>,
     pub best_epoch: usize,
+    /// The best epoch's loss on the meshes that chose it (`selected_on`).
     pub best_loss: f64,
+    pub selected_on: Selection,
     pub seconds: f64,
 }
 
@@ -164,6 +185,8 @@ pub fn train(
         rng: Rng::new(stream_seed(spec.train.seed)).state(),
         best_loss: f64::INFINITY,
         best_epoch: 0,
+        best_test_loss: f64::INFINITY,
+        best_test_epoch: 0,
     };
     if options.resume && folder.checkpoint().is_file() {
         progress = Checkpoint::load(&folder.checkpoint(), &mut model, &mut adam)?;
@@ -179,6 +202,9 @@ pub fn train(
     let mut last = None;
     let mut epochs_run = 0;
     let mut best = None;
+    let mut best_on_test = None;
+    let selection = data.split.selection();
+    let keep_in_memory = model.param_count().with_biases <= options.best_in_memory_params;
     let mut last_write = Instant::now();
 
     for epoch in progress.epoch + 1..=epochs {
@@ -245,36 +271,36 @@ pub fn train(
         }
         drop(engine);
         let n = train_ids.len().max(1) as f64;
-        let test_loss = validation_loss(
-            &model,
-            &data,
-            &data.split.test,
-            batch,
-            &spec.train.loss,
-            device,
-        )?;
+        let loss_on =
+            |ids: &[usize]| validation_loss(&model, &data, ids, batch, &spec.train.loss, device);
+        let val_loss = loss_on(&data.split.val)?;
+        // Evaluated in inference mode: it reads the weights and changes nothing.
+        let test_loss = loss_on(&data.split.test)?;
         let record = EpochRecord {
             epoch,
             train_loss: sums[0] / n,
             rec: sums[1] / n,
             kl: sums[2] / n,
             l2: sums[3] / n,
+            val_loss,
             test_loss,
             seconds: t0.elapsed().as_secs_f64(),
         };
-        // Without test meshes the best model is the one with the lowest training loss.
-        let score = test_loss.unwrap_or(record.train_loss);
+        // A kill before the next checkpoint replays the epochs since and rewrites the same
+        // weights, so writing best weights early is safe.
+        let score = record.score(selection);
         if score < progress.best_loss {
-            if model.param_count().with_biases <= options.best_in_memory_params {
-                best = Some(model.tensors()?);
-            } else {
-                // A kill before the next checkpoint replays these epochs and rewrites the same
-                // weights.
-                model.save(&folder.weights())?;
-                best = None;
-            }
+            best = keep_best(&model, keep_in_memory, &folder.weights())?;
             progress.best_loss = score;
             progress.best_epoch = epoch;
+        }
+        if let Some(t) = test_loss
+            && t < progress.best_test_loss
+        {
+            let path = folder.weights_selected_on_test();
+            best_on_test = keep_best(&model, keep_in_memory, &path)?;
+            progress.best_test_loss = t;
+            progress.best_test_epoch = epoch;
         }
         progress.epoch = epoch;
         progress.rng = rng.state();
@@ -285,13 +311,18 @@ pub fn train(
             if let Some(best) = best.take() {
                 model.save_snapshot(&best, &folder.weights())?;
             }
+            if let Some(best) = best_on_test.take() {
+                model.save_snapshot(&best, &folder.weights_selected_on_test())?;
+            }
             Checkpoint::save(&folder.checkpoint(), &model, &adam, &progress)?;
             last_write = Instant::now();
         }
+        let show = |l: Option<f64>| l.map_or("–".into(), |t| format!("{t:.3}"));
         bar.set_message(format!(
-            "epoch {epoch}/{epochs}  loss {:.3}  test {}",
+            "epoch {epoch}/{epochs}  loss {:.3}  val {}  test {}",
             record.train_loss,
-            test_loss.map_or("–".into(), |t| format!("{t:.3}"))
+            show(val_loss),
+            show(test_loss)
         ));
         on_epoch(&record);
         last = Some(record);
@@ -304,8 +335,24 @@ pub fn train(
         last,
         best_epoch: progress.best_epoch,
         best_loss: progress.best_loss,
+        selected_on: selection,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// A copy of the model's tensors if small enough to keep in memory until the next checkpoint;
+/// otherwise the weights are written to `path` now (so that a copy of a large model, ~200 MB on
+/// a 42k-vertex mesh, does not stay in memory through the next epochs).
+fn keep_best(
+    model: &MeshVae,
+    in_memory: bool,
+    path: &Path,
+) -> Result<Option<std::collections::BTreeMap<String, candle_core::Tensor>>> {
+    if in_memory {
+        return Ok(Some(model.tensors()?));
+    }
+    model.save(path)?;
+    Ok(None)
 }
 
 /// w_rec · mean over `ids` of the squared error with z = μ (inference mode), or `None`.
@@ -342,7 +389,8 @@ fn fresh_setup(
             s.clone()
         }
         None => Split::random(set.len(), request.train.test_fraction, request.train.seed)?,
-    };
+    }
+    .with_validation(request.train.val_fraction, request.train.seed)?;
     let labels = mesh_labels(&request.model, set, &split)?;
     prepare_out_dir(folder, force)?;
     let template = set.template();
@@ -450,9 +498,21 @@ fn resume_setup(
         differences.push("mesh labels");
     }
     let (a, b) = (&spec.train, &request.train);
-    if (a.batch, a.lr, a.seed, a.loss, a.test_fraction)
-        != (b.batch, b.lr, b.seed, b.loss, b.test_fraction)
-    {
+    if (
+        a.batch,
+        a.lr,
+        a.seed,
+        a.loss,
+        a.test_fraction,
+        a.val_fraction,
+    ) != (
+        b.batch,
+        b.lr,
+        b.seed,
+        b.loss,
+        b.test_fraction,
+        b.val_fraction,
+    ) {
         differences.push("training settings other than epochs");
     }
     if !differences.is_empty() {
@@ -471,10 +531,7 @@ fn resume_setup(
     let hierarchy = Hierarchy::load(&folder.hierarchy())?;
     let normalization = folder.read_json(&folder.normalization())?;
     let split_file: SplitFile = folder.read_json(&folder.split())?;
-    let split = Split {
-        train: split_file.train,
-        test: split_file.test,
-    };
+    let split = split_file.split();
     split.check(request.set.len())?;
     let features = deform_features::extract_features(request.set, spec.features)?;
     let mut data =
@@ -509,6 +566,7 @@ fn prepare_out_dir(folder: &ModelFolder, force: bool) -> Result<()> {
                 folder.config(),
                 folder.checkpoint(),
                 folder.weights(),
+                folder.weights_selected_on_test(),
                 folder.log(),
                 folder.hierarchy(),
                 folder.normalization(),

@@ -7,8 +7,8 @@ use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
 use meshvae::{
-    ModelConfig, ModelFolder, TrainConfig, TrainOptions, TrainRequest, TrainedModel, VaeError,
-    read_log, train,
+    ModelConfig, ModelFolder, Selection, TrainConfig, TrainOptions, TrainRequest, TrainedModel,
+    VaeError, read_log, train,
 };
 use std::path::{Path, PathBuf};
 
@@ -154,7 +154,9 @@ fn model_folder_is_complete_refuses_overwrite_and_evaluates() {
 
     let trained = TrainedModel::load(&out, &Device::Cpu).unwrap();
     let report = trained.evaluate(&set, &Device::Cpu).unwrap();
-    assert_eq!(report.test.meshes + report.train.meshes, set.len());
+    let val = trained.split.val.len();
+    assert!(val >= 1, "the default carves a validation set");
+    assert_eq!(report.test.meshes + val + report.train.meshes, set.len());
     assert!(report.test.rms.is_finite() && report.test.rms > 0.0);
     assert!((report.test.rms_x1000 - 1000.0 * report.test.rms).abs() < 1e-9);
     assert_eq!(report.params, trained.model.param_count());
@@ -208,4 +210,100 @@ fn a_non_finite_loss_stops_training_with_a_message() {
     assert!(text.contains("epoch 1") && text.contains("inf"), "{text}");
     assert!(!ModelFolder::new(&out).weights().exists());
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The default protocol: no test mesh influences training or the choice of checkpoint. Two
+/// runs whose sets differ only in the test meshes (bent out of shape) end with bit-identical
+/// weights, checkpoints and validation losses; only the logged test losses differ.
+#[test]
+fn test_meshes_influence_neither_training_nor_the_chosen_checkpoint() {
+    let set = small_set(3, 8);
+    let out_a = scratch("leak-a");
+    let out_b = scratch("leak-b");
+    let a = train(&request(&set, &out_a, 4), &options(false, false), |_| {}).unwrap();
+    assert_eq!(a.selected_on, Selection::Validation);
+    let split = TrainedModel::load(&out_a, &Device::Cpu).unwrap().split;
+    assert!(!split.val.is_empty() && !split.test.is_empty());
+    assert!(split.train.contains(&0), "the rest pose trains");
+
+    let mut positions = Vec::new();
+    for (i, frame) in set.frames().enumerate() {
+        let test = split.test.contains(&i);
+        positions.extend(frame.iter().map(|p| match test {
+            true => [
+                p[0] * 1.3 + 0.2 * p[1] * p[1],
+                p[1] * 0.8,
+                p[2] + 0.1 * p[0],
+            ],
+            false => *p,
+        }));
+    }
+    let perturbed = MeshSet::from_flat(
+        set.faces().to_vec(),
+        set.vertex_count(),
+        positions,
+        set.names().to_vec(),
+    )
+    .unwrap();
+    train(
+        &request(&perturbed, &out_b, 4),
+        &options(false, false),
+        |_| {},
+    )
+    .unwrap();
+
+    let (fa, fb) = (ModelFolder::new(&out_a), ModelFolder::new(&out_b));
+    let read = |path: PathBuf| std::fs::read(path).unwrap();
+    assert!(
+        read(fa.weights()) == read(fb.weights()),
+        "best weights differ"
+    );
+    // The checkpoints' training state (weights, batch-norm statistics, Adam's moments) is
+    // identical; only their record of the best test loss differs.
+    let state = |f: &ModelFolder| {
+        let map = candle_core::safetensors::load(f.checkpoint(), &Device::Cpu).unwrap();
+        let mut state: Vec<(String, Vec<f64>)> = map
+            .into_iter()
+            .filter(|(k, _)| k.starts_with("model.") || k.starts_with("adam."))
+            .map(|(k, t)| {
+                let t = t.flatten_all().unwrap();
+                (
+                    k,
+                    t.to_dtype(candle_core::DType::F64)
+                        .unwrap()
+                        .to_vec1()
+                        .unwrap(),
+                )
+            })
+            .collect();
+        state.sort_by(|a, b| a.0.cmp(&b.0));
+        state
+    };
+    let (sa, sb) = (state(&fa), state(&fb));
+    assert!(sa.len() > 10, "{} tensors", sa.len());
+    for ((ka, a), (kb, b)) in sa.iter().zip(&sb) {
+        assert_eq!(ka, kb);
+        let same = a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+        assert!(same, "checkpointed {ka} differs");
+    }
+    let (log_a, log_b) = (read_log(&fa.log()).unwrap(), read_log(&fb.log()).unwrap());
+    for (x, y) in log_a.iter().zip(&log_b) {
+        assert_eq!((x.train_loss, x.val_loss), (y.train_loss, y.val_loss));
+        assert_ne!(
+            x.test_loss, y.test_loss,
+            "the perturbation reached the test meshes"
+        );
+    }
+    // The authors' protocol is still available, labelled, from its own weights file.
+    assert!(fa.weights_selected_on_test().is_file());
+    let on_test = TrainedModel::load_selected(&out_a, &Device::Cpu, true).unwrap();
+    assert_eq!(on_test.selected_on, Selection::Test);
+    let best_test = log_a
+        .iter()
+        .min_by(|x, y| x.test_loss.unwrap().total_cmp(&y.test_loss.unwrap()))
+        .unwrap()
+        .epoch;
+    assert_eq!(on_test.epochs_trained().unwrap().1, best_test);
+    let _ = std::fs::remove_dir_all(&out_a);
+    let _ = std::fs::remove_dir_all(&out_b);
 }
