@@ -71,8 +71,10 @@ pub struct TrainOptions {
     /// epoch of a 0.5 s epoch would dominate the run; a kill loses at most this much work.
     pub checkpoint_seconds: f64,
     /// Models with up to this many parameters keep their best weights in memory until the next
-    /// checkpoint; larger ones write them as soon as they improve, so that a copy of a large
-    /// model (~200 MB on a 42k-vertex mesh) does not stay in memory through the next epochs.
+    /// checkpoint, and their training engine from one epoch to the next; larger ones write their
+    /// best weights as soon as they improve and rebuild the engine every epoch, so that neither
+    /// a copy of a large model (~200 MB on a 42k-vertex mesh) nor the engine's buffers stay in
+    /// memory beside the validation and checkpoint work.
     pub best_in_memory_params: usize,
     pub device: Device,
     /// Train with the hand-written CPU step ([`crate::Engine`]) whenever it supports the model;
@@ -205,6 +207,7 @@ pub fn train(
     let mut best_on_test = None;
     let selection = data.split.selection();
     let keep_in_memory = model.param_count().with_biases <= options.best_in_memory_params;
+    let mut kept_engine = None;
     let mut last_write = Instant::now();
 
     for epoch in progress.epoch + 1..=epochs {
@@ -212,11 +215,14 @@ pub fn train(
         let mut order = train_ids.clone();
         rng.shuffle(&mut order);
         let mut sums = [0.0f64; 4];
-        // Built per epoch and dropped before validation and checkpoints, so that its buffers
-        // (~0.6 GB on elephant-gallop at batch 16) never coexist with a checkpoint's copies.
-        let mut engine = match options.engine {
-            true => crate::model::Engine::new(&model, batch)?,
-            false => None,
+        // A large model's engine is built per epoch and dropped before validation and
+        // checkpoints, so that its buffers (~0.6 GB on elephant-gallop at batch 16) never
+        // coexist with a checkpoint's copies; a small one's is kept (building it and touching
+        // fresh pages cost ~10 % of a horse-gallop epoch).
+        let mut engine = match (kept_engine.take(), options.engine) {
+            (Some(engine), _) => Some(engine),
+            (None, true) => crate::model::Engine::new(&model, batch)?,
+            (None, false) => None,
         };
         for chunk in order.chunks(batch) {
             let x = data.batch(chunk, device)?;
@@ -269,7 +275,11 @@ pub fn train(
             }
             bar.inc(1);
         }
-        drop(engine);
+        if keep_in_memory {
+            kept_engine = engine;
+        } else {
+            drop(engine);
+        }
         let n = train_ids.len().max(1) as f64;
         let loss_on =
             |ids: &[usize]| validation_loss(&model, &data, ids, batch, &spec.train.loss, device);
