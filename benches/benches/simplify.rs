@@ -1,10 +1,13 @@
 //! Simplifying elephant-gallop's template (42,321 vertices) to half its vertices: qem-simplify
 //! (λ = 0.001 and classical λ = 0) side by side with meshoptimizer's simplifier at the same
-//! target, plus each result's edge-length CV, printed before the timings.
+//! target, and isotropic remeshing (`qem_simplify::remesh`, the paper's "uniform remeshing"
+//! ablation) to the same 21,161 vertices, plus each result's edge-length CV (and, for ours, the
+//! geometric error), printed before the timings.
 //!
 //! `cargo bench -p meshvae-benches --bench simplify` (skips, saying so, without the data set).
 //! qem-simplify's set-up (edge table, initial costs) runs on rayon's threads, its contraction
-//! loop on one; meshopt is single-threaded. `RAYON_NUM_THREADS=1` gives the one-thread figure.
+//! loop on one; the remesher's relaxation, projection and flip checks run on rayon's threads,
+//! its splits, collapses and flips on one; meshopt is single-threaded. `RAYON_NUM_THREADS=1` gives the one-thread figure.
 
 // glibc returns each large buffer to the kernel when it is freed, so every call pays ~3,000
 // page faults for fresh memory; the benches use mimalloc, as the `meshvae` binary does.
@@ -14,7 +17,9 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use criterion::{Criterion, criterion_group, criterion_main};
 use mesh_io::TriMesh;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
-use qem_simplify::{SimplifyConfig, Target, edge_length_cv, simplify};
+use qem_simplify::{
+    RemeshConfig, SimplifyConfig, Target, edge_length_cv, geometric_error_rel, remesh, simplify,
+};
 use std::hint::black_box;
 
 /// meshopt's result as an index buffer into the fine vertices.
@@ -89,12 +94,22 @@ fn bench_simplify(c: &mut Criterion) {
     for lambda in [0.001, 0.0] {
         let s = simplify(&fine, &config(lambda)).expect("simplifies");
         println!(
-            "qem-simplify lambda={lambda}: {} vertices, {} faces, edge_cv {:.4}",
+            "qem-simplify lambda={lambda}: {} vertices, {} faces, edge_cv {:.4}, \
+             geometric_error_rel {:.2e}",
             s.coarse.vertex_count(),
             s.coarse.face_count(),
-            edge_length_cv(&s.coarse.positions, &s.coarse.faces)
+            edge_length_cv(&s.coarse.positions, &s.coarse.faces),
+            geometric_error_rel(&fine, &s.coarse)
         );
     }
+    let r = remesh(&fine, &RemeshConfig::default()).expect("remeshes");
+    println!(
+        "remesh: {} vertices, {} faces, edge_cv {:.4}, geometric_error_rel {:.2e}",
+        r.coarse.vertex_count(),
+        r.coarse.face_count(),
+        edge_length_cv(&r.coarse.positions, &r.coarse.faces),
+        geometric_error_rel(&fine, &r.coarse)
+    );
     for (name, options) in [
         ("meshopt", SimplifyOptions::None),
         ("meshopt Regularize", SimplifyOptions::Regularize),
@@ -115,6 +130,9 @@ fn bench_simplify(c: &mut Criterion) {
     });
     group.bench_function("qem-simplify lambda=0", |b| {
         b.iter(|| simplify(black_box(&fine), &config(0.0)).expect("simplifies"))
+    });
+    group.bench_function("remesh", |b| {
+        b.iter(|| remesh(black_box(&fine), &RemeshConfig::default()).expect("remeshes"))
     });
     group.bench_function("meshopt", |b| {
         b.iter(|| meshopt_simplify(black_box(&fine), target, SimplifyOptions::None))

@@ -47,7 +47,8 @@ enum Command {
     Features(features::FeaturesArgs),
     /// Features -> meshes for every frame; prints the reconstruction errors.
     Roundtrip(features::RoundtripArgs),
-    /// Simplify a mesh (or a set's template) by quadric edge collapse with the edge-length term.
+    /// Simplify a mesh (or a set's template) by quadric edge collapse with the edge-length
+    /// term, or remesh it isotropically (`--method remesh`).
     Simplify(simplify::SimplifyArgs),
     /// Train a mesh VAE on a set; writes a model folder (resumable with --resume).
     Train(Box<train::TrainArgs>),

@@ -1,8 +1,9 @@
-//! `meshvae simplify <MESH|SET> [--ratio 0.5] [--lambda 0.001] --out coarse.obj [--json]`
+//! `meshvae simplify <MESH|SET> [--method qem|remesh] [--ratio 0.5] [--lambda 0.001]
+//! --out coarse.obj [--json]`
 
 use crate::{CliError, print_warnings};
 use mesh_io::TriMesh;
-use qem_simplify::{SimplifyConfig, SimplifyReport, Target};
+use qem_simplify::{RemeshConfig, SimplifyConfig, SimplifyReport, Target};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -11,21 +12,34 @@ pub struct SimplifyArgs {
     /// A mesh file (OBJ, OFF, PLY, GLB), or a mesh set — a folder or a .mvset cache — whose
     /// template (frame 0) is simplified.
     input: PathBuf,
+    /// `qem`: quadric edge collapse with the edge-length term (the paper's method); `remesh`:
+    /// isotropic remeshing to the same count (the "uniform remeshing" ablation), clusters by
+    /// nearest coarse vertex along the fine edges.
+    #[arg(long, value_enum, default_value_t = Method::Qem)]
+    method: Method,
     /// Fraction of the vertices to keep, in (0, 1]; the count is rounded up.
     #[arg(long, default_value_t = 0.5)]
     ratio: f64,
-    /// Weight of the edge-length term (lengths in units of the bounding-box diagonal);
-    /// 0 gives classical quadric simplification.
-    #[arg(long, default_value_t = qem_simplify::DEFAULT_LAMBDA)]
-    lambda: f64,
+    /// QEM only: weight of the edge-length term (lengths in units of the bounding-box
+    /// diagonal); 0 gives classical quadric simplification. [default: 0.001]
+    #[arg(long)]
+    lambda: Option<f64>,
     /// The coarse mesh to write (OBJ, OFF, PLY or GLB by extension), atomically.
     #[arg(long)]
     out: PathBuf,
-    /// Print one JSON object (keys: vertices_in, vertices_out, faces_in, faces_out, lambda,
-    /// edge_cv_in, edge_cv, cluster_cv, cluster_max, cluster_area_cv, manifold, flipped_faces,
-    /// degenerate_faces, euler_in, euler_out, seconds, geometric_error_rel).
+    /// Print one JSON object, the same keys for both methods (method, vertices_in,
+    /// vertices_out, faces_in, faces_out, lambda (null for remesh), edge_cv_in, edge_cv,
+    /// cluster_cv, cluster_max, cluster_area_cv, manifold, flipped_faces, degenerate_faces,
+    /// euler_in, euler_out, seconds, geometric_error_rel).
     #[arg(long)]
     json: bool,
+}
+
+/// How the coarse mesh is made.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    Qem,
+    Remesh,
 }
 
 pub fn run(args: &SimplifyArgs) -> Result<(), CliError> {
@@ -38,16 +52,34 @@ pub fn run(args: &SimplifyArgs) -> Result<(), CliError> {
             ),
         ));
     }
+    if args.method == Method::Remesh && args.lambda.is_some() {
+        return Err(CliError::argument(
+            "--lambda",
+            "applies to --method qem only (a remeshing has no edge-length weight)",
+        ));
+    }
     let fine = read_input(&args.input)?;
-    let config = SimplifyConfig {
-        target: Target::Ratio(args.ratio),
-        lambda: args.lambda,
-    };
+    let target = Target::Ratio(args.ratio);
     let start = Instant::now();
-    let simplified = qem_simplify::simplify(&fine, &config)?;
-    let seconds = start.elapsed().as_secs_f64();
-    mesh_io::write_mesh(&args.out, &simplified.coarse)?;
-    let report = SimplifyReport::of(&fine, &simplified, args.lambda, seconds);
+    let report = match args.method {
+        Method::Qem => {
+            let lambda = args.lambda.unwrap_or(qem_simplify::DEFAULT_LAMBDA);
+            let simplified = qem_simplify::simplify(&fine, &SimplifyConfig { target, lambda })?;
+            let seconds = start.elapsed().as_secs_f64();
+            mesh_io::write_mesh(&args.out, &simplified.coarse)?;
+            SimplifyReport::of(&fine, &simplified, lambda, seconds)
+        }
+        Method::Remesh => {
+            let config = RemeshConfig {
+                target,
+                ..RemeshConfig::default()
+            };
+            let remeshed = qem_simplify::remesh(&fine, &config)?;
+            let seconds = start.elapsed().as_secs_f64();
+            mesh_io::write_mesh(&args.out, &remeshed.coarse)?;
+            SimplifyReport::of_remeshed(&fine, &remeshed, seconds)
+        }
+    };
     if args.json {
         let text = serde_json::to_string_pretty(&report)
             .map_err(|e| CliError::argument("--json", e.to_string()))?;
@@ -55,6 +87,7 @@ pub fn run(args: &SimplifyArgs) -> Result<(), CliError> {
         return Ok(());
     }
     println!("{} -> {}", args.input.display(), args.out.display());
+    println!("  method               {}", report.method.as_str());
     println!(
         "  vertices             {} -> {}",
         report.vertices_in, report.vertices_out
@@ -63,7 +96,10 @@ pub fn run(args: &SimplifyArgs) -> Result<(), CliError> {
         "  faces                {} -> {}",
         report.faces_in, report.faces_out
     );
-    println!("  lambda               {}", report.lambda);
+    match report.lambda {
+        Some(lambda) => println!("  lambda               {lambda}"),
+        None => println!("  lambda               -"),
+    }
     println!(
         "  edge-length CV       {:.4} -> {:.4}",
         report.edge_cv_in, report.edge_cv

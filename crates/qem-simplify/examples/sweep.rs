@@ -1,5 +1,5 @@
-//! The λ sweep of docs/benchmarks.d/qem.md: for each template and λ, the coarse mesh's
-//! edge-length and cluster-size spread and its geometric error.
+//! The λ sweep of docs/benchmarks.md ("Mesh simplification"): for each template and λ, the
+//! coarse mesh's edge-length and cluster-size spread and its geometric error.
 //!
 //! `cargo run --release -p qem-simplify --example sweep [-- SET...]` (default: horse-gallop,
 //! samba, elephant-gallop; sets are looked up with `mesh_io::datasets::find`).

@@ -24,6 +24,20 @@ pub enum SimplifyError {
          vertices"
     )]
     TargetUnreachable { target: usize, reached: usize },
+    /// The faces have zero total area: there is no surface to remesh.
+    #[error("the input mesh has zero area (all {faces} faces are degenerate)")]
+    ZeroArea { faces: usize },
+    /// A remeshing put more coarse vertices on a connected component of the template than it
+    /// has fine vertices, so not every cluster can hold a fine vertex of its own.
+    #[error(
+        "component {component} of the template has {fine} vertices, fewer than the {coarse} \
+         coarse vertices remeshed onto it"
+    )]
+    ComponentTooSmall {
+        component: usize,
+        fine: usize,
+        coarse: usize,
+    },
 }
 
 /// This crate's result type.

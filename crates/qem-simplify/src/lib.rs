@@ -5,6 +5,8 @@
 //! mesh pooling averages over (every fine vertex in exactly one cluster, every cluster connected
 //! on the fine mesh), plus reports on how even ([`UniformityReport`]) and how faithful
 //! ([`geometric_error_rel`]) the result is.
+//! [`remesh`] is the ablation's alternative: isotropic remeshing to the same count, with clusters
+//! by geodesic nearest coarse vertex (see [`RemeshConfig`]).
 //!
 //! ## The method
 //! Garland–Heckbert edge contraction, cheapest first, with the cost of Eq. 1 of Yuan et al. 2020:
@@ -57,12 +59,14 @@ mod lists;
 pub mod manifold;
 mod prefetch;
 pub mod quadric;
+mod remesh;
 mod report;
 pub mod shapes;
 mod simplify;
 
 pub use error::{Result, SimplifyError};
+pub use remesh::{RemeshConfig, Remeshed, Smoothing, flipped_faces_on_surface, remesh};
 pub use report::{
-    SimplifyReport, UniformityReport, edge_length_cv, flipped_faces, geometric_error_rel,
+    Method, SimplifyReport, UniformityReport, edge_length_cv, flipped_faces, geometric_error_rel,
 };
 pub use simplify::{DEFAULT_LAMBDA, Simplified, SimplifyConfig, Target, simplify};

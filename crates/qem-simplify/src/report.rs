@@ -1,9 +1,11 @@
-//! How even and how faithful a simplification is: edge-length and cluster-size spread, flipped
-//! faces, the geometric error, and the full report that `meshvae simplify` prints.
+//! How even and how faithful a simplification (or a remeshing) is: edge-length and cluster-size
+//! spread, flipped faces, the geometric error, and the full report that `meshvae simplify`
+//! prints.
 
 use crate::geometry::{area_vector, dot, to_f64};
 use crate::grid::TriangleGrid;
 use crate::manifold::manifold_defect;
+use crate::remesh::{Remeshed, flipped_faces_on_surface};
 use crate::simplify::Simplified;
 use mesh_io::{Face, Point, QualityReport, TriMesh};
 use serde::Serialize;
@@ -28,19 +30,33 @@ pub struct UniformityReport {
 impl UniformityReport {
     /// The report on `simplified`, the simplification of `fine`.
     pub fn of(fine: &TriMesh, simplified: &Simplified) -> Self {
-        let lengths = edge_lengths(&simplified.coarse.positions, &simplified.coarse.faces);
-        let sizes: Vec<f64> = simplified
-            .cluster_sizes()
-            .into_iter()
-            .map(|s| s as f64)
-            .collect();
-        let mut areas = vec![0.0; simplified.survivors.len()];
+        Self::of_clusters(fine, &simplified.coarse, &simplified.cluster_of)
+    }
+
+    /// The report on `remeshed`, the remeshing of `fine`.
+    pub fn of_remeshed(fine: &TriMesh, remeshed: &Remeshed) -> Self {
+        Self::of_clusters(fine, &remeshed.coarse, &remeshed.cluster_of)
+    }
+
+    /// The report on any coarse mesh of `fine` with the map `cluster_of` (fine vertex → coarse
+    /// vertex; entries out of range are ignored).
+    pub fn of_clusters(fine: &TriMesh, coarse: &TriMesh, cluster_of: &[u32]) -> Self {
+        let lengths = edge_lengths(&coarse.positions, &coarse.faces);
+        let mut sizes = vec![0.0; coarse.vertex_count()];
+        for &c in cluster_of {
+            if let Some(s) = sizes.get_mut(c as usize) {
+                *s += 1.0;
+            }
+        }
+        let mut areas = vec![0.0; coarse.vertex_count()];
         for f in &fine.faces {
             let p = f.map(|v| to_f64(fine.positions[v as usize]));
             let third = crate::geometry::norm(area_vector(p[0], p[1], p[2])) / 6.0;
             for &v in f {
-                if let Some(&c) = simplified.cluster_of.get(v as usize) {
-                    areas[c as usize] += third;
+                if let Some(&c) = cluster_of.get(v as usize)
+                    && let Some(a) = areas.get_mut(c as usize)
+                {
+                    *a += third;
                 }
             }
         }
@@ -133,14 +149,36 @@ pub fn geometric_error_rel(fine: &TriMesh, coarse: &TriMesh) -> f64 {
     (sum / points.len() as f64).sqrt() / diagonal
 }
 
-/// Everything `meshvae simplify --json` prints.
+/// Which method made a coarse mesh: serialised as `"qem"` or `"remesh"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Quadric edge collapse with the edge-length term ([`crate::simplify`]).
+    Qem,
+    /// Isotropic remeshing ([`crate::remesh()`]).
+    Remesh,
+}
+
+impl Method {
+    /// The name in the JSON report and on the command line: `"qem"` or `"remesh"`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Qem => "qem",
+            Self::Remesh => "remesh",
+        }
+    }
+}
+
+/// Everything `meshvae simplify --json` prints, for either method (the same keys).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SimplifyReport {
+    pub method: Method,
     pub vertices_in: usize,
     pub vertices_out: usize,
     pub faces_in: usize,
     pub faces_out: usize,
-    pub lambda: f64,
+    /// The edge-length weight λ of QEM; `None` (JSON `null`) for a remeshing, which has none.
+    pub lambda: Option<f64>,
     /// Edge-length CV of the input, for comparison with `edge_cv`.
     pub edge_cv_in: f64,
     pub edge_cv: f64,
@@ -149,6 +187,9 @@ pub struct SimplifyReport {
     pub cluster_area_cv: f64,
     /// The output is a 2-manifold (see [`crate::manifold::manifold_defect`]).
     pub manifold: bool,
+    /// QEM: coarse faces turned against the fine face they descend from ([`flipped_faces`]).
+    /// Remeshing: coarse faces turned against the template's normal at the closest point to
+    /// their centroid ([`flipped_faces_on_surface`]).
     pub flipped_faces: usize,
     /// Output faces with a repeated vertex or (near) zero area, as `mesh_io::QualityReport`
     /// counts them.
@@ -163,11 +204,40 @@ pub struct SimplifyReport {
 impl SimplifyReport {
     /// The report on simplifying `fine` to `simplified` with weight `lambda` in `seconds`.
     pub fn of(fine: &TriMesh, simplified: &Simplified, lambda: f64, seconds: f64) -> Self {
-        let coarse = &simplified.coarse;
+        let uniformity = UniformityReport::of(fine, simplified);
+        let flipped = flipped_faces(fine, simplified);
+        let method = (Method::Qem, Some(lambda));
+        Self::assemble(
+            method,
+            fine,
+            &simplified.coarse,
+            uniformity,
+            flipped,
+            seconds,
+        )
+    }
+
+    /// The report on remeshing `fine` to `remeshed` in `seconds`.
+    pub fn of_remeshed(fine: &TriMesh, remeshed: &Remeshed, seconds: f64) -> Self {
+        let uniformity = UniformityReport::of_remeshed(fine, remeshed);
+        let flipped = flipped_faces_on_surface(fine, &remeshed.coarse);
+        let method = (Method::Remesh, None);
+        Self::assemble(method, fine, &remeshed.coarse, uniformity, flipped, seconds)
+    }
+
+    /// The report for `(method, λ)`: what both methods share.
+    fn assemble(
+        (method, lambda): (Method, Option<f64>),
+        fine: &TriMesh,
+        coarse: &TriMesh,
+        uniformity: UniformityReport,
+        flipped_faces: usize,
+        seconds: f64,
+    ) -> Self {
         let quality_in = QualityReport::of_mesh(&fine.positions, &fine.faces);
         let quality_out = QualityReport::of_mesh(&coarse.positions, &coarse.faces);
-        let uniformity = UniformityReport::of(fine, simplified);
         Self {
+            method,
             vertices_in: fine.vertex_count(),
             vertices_out: coarse.vertex_count(),
             faces_in: fine.face_count(),
@@ -179,7 +249,7 @@ impl SimplifyReport {
             cluster_max: uniformity.cluster_max,
             cluster_area_cv: uniformity.cluster_area_cv,
             manifold: manifold_defect(coarse.vertex_count(), &coarse.faces).is_none(),
-            flipped_faces: flipped_faces(fine, simplified),
+            flipped_faces,
             degenerate_faces: quality_out.degenerate_faces,
             euler_in: quality_in.euler_characteristic,
             euler_out: quality_out.euler_characteristic,
@@ -226,5 +296,30 @@ mod tests {
         };
         let e = geometric_error_rel(&flat, &lifted);
         assert!((e - 0.01 / 2f64.sqrt()).abs() < 1e-7, "{e}");
+    }
+
+    #[test]
+    fn both_methods_fill_the_same_report() {
+        let sphere = crate::shapes::icosphere(2);
+        let config = crate::SimplifyConfig::default();
+        let s = crate::simplify(&sphere, &config).expect("simplifies");
+        let qem = SimplifyReport::of(&sphere, &s, 0.001, 0.5);
+        assert_eq!((qem.method, qem.lambda), (Method::Qem, Some(0.001)));
+        let r = crate::remesh(&sphere, &crate::RemeshConfig::default()).expect("remeshes");
+        let remeshed = SimplifyReport::of_remeshed(&sphere, &r, 0.25);
+        assert_eq!((remeshed.method, remeshed.lambda), (Method::Remesh, None));
+        for report in [&qem, &remeshed] {
+            assert_eq!(report.vertices_in, 162);
+            assert_eq!(report.vertices_out, 81);
+            assert!(report.manifold);
+            assert_eq!((report.euler_in, report.euler_out), (2, 2));
+            assert_eq!(report.flipped_faces, 0);
+            assert_eq!(report.degenerate_faces, 0);
+        }
+        assert_eq!(remeshed.seconds, 0.25);
+        // The same cluster statistics as computed from the map directly.
+        let direct = UniformityReport::of_clusters(&sphere, &r.coarse, &r.cluster_of);
+        assert_eq!(remeshed.cluster_cv, direct.cluster_cv);
+        assert_eq!(Method::Remesh.as_str(), "remesh");
     }
 }
