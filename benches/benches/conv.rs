@@ -12,7 +12,10 @@
 //! (`spectral_conv::ChebKernel`, `SparseKernel`), as meshvae's training engine does: no tensor
 //! allocation, no autograd.
 //! Pooling and de-pooling use mesh-hierarchy's operators for our pooler (modified QEM to half the
-//! vertices, mean pooling, de-pooling by copy).
+//! vertices, mean pooling, de-pooling by copy). On elephant-gallop the ablation's other two
+//! poolings sit beside them: graph max pooling (the same coarse vertices, the plain max over
+//! each survivor's one-ring ∪ cluster; de-pooling by the mean over the neighbourhoods holding a
+//! vertex) and remeshing (`qem_simplify::remesh` to half the vertices, mean pooling).
 
 // candle allocates and frees a 50 MB tensor per op; glibc's allocator makes every op 2–3x
 // slower here, so the benches use mimalloc, as the `meshvae` binary does.
@@ -22,12 +25,13 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use candle_core::{Device, Tensor, Var};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use mesh_hierarchy::{
-    CsrMatrix, Hierarchy, HierarchyConfig, LambdaMax, adjacency, normalized_laplacian,
-    rescaled_laplacian,
+    CsrMatrix, DepoolMode, Hierarchy, HierarchyConfig, LambdaMax, Pooler, PoolingOp, adjacency,
+    normalized_laplacian, rescaled_laplacian,
 };
+use qem_simplify::{RemeshConfig, SimplifyConfig, remesh, simplify};
 use spectral_conv::{
-    Backend, ChebConv, ChebKernel, ConvDims, DePool, MeanPool, SparseKernel, SparseOp,
-    locality_order, permute_symmetric,
+    Backend, ChebConv, ChebKernel, ConvDims, DePool, MaxMode, MaxPool, MeanPool, SparseKernel,
+    SparseOp, locality_order, permute_symmetric,
 };
 use std::hint::black_box;
 use std::time::Duration;
@@ -42,6 +46,26 @@ struct Graph {
     depooling: CsrMatrix,
     /// Whether to run every benchmark (false: only the custom-op ones).
     full: bool,
+    /// The graph-pooling and remeshing operators (elephant-gallop only).
+    ablation: Option<Ablation>,
+}
+
+/// The operators of the two ablation poolings added with graph pooling.
+struct Ablation {
+    graph: PoolingOp,
+    remesh: PoolingOp,
+}
+
+impl Ablation {
+    fn build(template: &mesh_io::TriMesh) -> Self {
+        let s = simplify(template, &SimplifyConfig::default()).expect("simplification");
+        let graph = PoolingOp::graph(&template.faces, &s.survivors, &s.cluster_of).expect("graph");
+        let r = remesh(template, &RemeshConfig::default()).expect("remeshing");
+        let m = r.coarse.vertex_count();
+        let remesh = PoolingOp::from_clusters(Pooler::Remesh, &r.cluster_of, m, DepoolMode::Copy)
+            .expect("clusters");
+        Self { graph, remesh }
+    }
 }
 
 /// The set's template graph, and (`reorder`) the same graph renumbered in
@@ -74,6 +98,7 @@ fn load(name: &str, reorder: bool) -> Option<Graph> {
         depooling: op.depool,
         laplacian,
         full: !reorder,
+        ablation: (name == "elephant-gallop" && !reorder).then(|| Ablation::build(&template)),
     })
 }
 
@@ -246,6 +271,9 @@ fn conv(c: &mut Criterion) {
                     })
                 });
             }
+            if let Some(ablation) = &graph.ablation {
+                buffer_level_ablation(&mut group, ablation, &xv);
+            }
         }
         // The vertex-major layout [V, B, C] a network keeps throughout (no transposes).
         let x_vm = Var::from_tensor(&random((v, BATCH, CHANNELS), 2)).expect("var");
@@ -322,8 +350,86 @@ fn conv(c: &mut Criterion) {
             format!("de-pool {coarse_v}->{v} fwd+bwd, vertex-major"),
             |b| b.iter(|| fwd_bwd(depool_vm, &coarse_vm, None)),
         );
+        if let Some(ablation) = &graph.ablation {
+            candle_ablation(&mut group, ablation, &x, &x_vm);
+        }
         group.finish();
     }
+}
+
+type Group<'a> = criterion::BenchmarkGroup<'a, criterion::measurement::WallTime>;
+
+/// Graph max pooling, its de-pooling and remeshing's mean pooling as candle ops, batch-major
+/// and vertex-major, forward + backward (the gradient seeded with ones).
+fn candle_ablation(group: &mut Group<'_>, ablation: &Ablation, x: &Var, x_vm: &Var) {
+    let dev = Device::Cpu;
+    let (graph, remeshed) = (&ablation.graph, &ablation.remesh);
+    let v = graph.fine_count();
+    let (m, mr) = (graph.coarse_count(), remeshed.coarse_count());
+    let max = MaxPool::with_mode(&graph.pool, MaxMode::Plain, &dev).expect("graph pool");
+    let up = DePool::new(&graph.depool, &dev).expect("graph de-pool");
+    let mean = MeanPool::new(&remeshed.pool, &dev).expect("remesh pool");
+    let coarse_vm = Var::from_tensor(&random((m, BATCH, CHANNELS), 5)).expect("var");
+    let max_fwd = |t: &Tensor| max.forward(t).expect("pool");
+    let max_vm = |t: &Tensor| max.forward_vertex_major(t).expect("pool");
+    let up_vm = |t: &Tensor| up.forward_vertex_major(t).expect("de-pool");
+    let mean_fwd = |t: &Tensor| mean.forward(t).expect("pool");
+    let mean_vm = |t: &Tensor| mean.forward_vertex_major(t).expect("pool");
+    group.bench_function(format!("graph pool {v}->{m} fwd"), |b| {
+        b.iter(|| black_box(max_fwd(x.as_tensor())))
+    });
+    group.bench_function(format!("graph pool {v}->{m} fwd+bwd"), |b| {
+        b.iter(|| fwd_bwd(max_fwd, x, None))
+    });
+    group.bench_function(format!("graph pool {v}->{m} fwd+bwd, vertex-major"), |b| {
+        b.iter(|| fwd_bwd(max_vm, x_vm, None))
+    });
+    group.bench_function(
+        format!("graph de-pool {m}->{v} fwd+bwd, vertex-major"),
+        |b| b.iter(|| fwd_bwd(up_vm, &coarse_vm, None)),
+    );
+    group.bench_function(format!("remesh pool {v}->{mr} fwd+bwd"), |b| {
+        b.iter(|| fwd_bwd(mean_fwd, x, None))
+    });
+    group.bench_function(
+        format!("remesh pool {v}->{mr} fwd+bwd, vertex-major"),
+        |b| b.iter(|| fwd_bwd(mean_vm, x_vm, None)),
+    );
+}
+
+/// The same three on caller-owned `[V, C, B]` slices, as the training engine runs them.
+fn buffer_level_ablation(group: &mut Group<'_>, ablation: &Ablation, xv: &[f32]) {
+    let dev = Device::Cpu;
+    let n = CHANNELS * BATCH;
+    let graph = &ablation.graph;
+    let (v, m) = (graph.fine_count(), graph.coarse_count());
+    let max = MaxPool::with_mode(&graph.pool, MaxMode::Plain, &dev).expect("graph pool");
+    let up = SparseKernel::new(DePool::new(&graph.depool, &dev).expect("de-pool").op());
+    let (mut y, mut arg, mut dx) = (vec![0.0f32; m * n], vec![0u32; m * n], vec![0.0f32; v * n]);
+    group.bench_function("graph pool fwd+bwd, buffer-level", |b| {
+        b.iter(|| {
+            max.forward_into(xv, &mut y, &mut arg, n).expect("pool");
+            max.backward_into(&arg, &y, &mut dx, n).expect("adjoint");
+            black_box(dx[0])
+        })
+    });
+    group.bench_function("graph de-pool fwd+bwd, buffer-level", |b| {
+        b.iter(|| {
+            up.apply(&y, &mut dx, n).expect("de-pool");
+            up.apply_t(&dx, &mut y, n).expect("adjoint");
+            black_box(y[0])
+        })
+    });
+    let remeshed = &ablation.remesh;
+    let mean = SparseKernel::new(MeanPool::new(&remeshed.pool, &dev).expect("pool").op());
+    let mut yr = vec![0.0f32; remeshed.coarse_count() * n];
+    group.bench_function("remesh pool fwd+bwd, buffer-level", |b| {
+        b.iter(|| {
+            mean.apply(xv, &mut yr, n).expect("pool");
+            mean.apply_t(&yr, &mut dx, n).expect("adjoint");
+            black_box(dx[0])
+        })
+    });
 }
 
 criterion_group!(benches, bandwidth, conv);

@@ -7,7 +7,7 @@ use crate::pooling::{DepoolMode, Pooler, PoolingOp};
 use crate::sampling;
 use crate::sparse::CsrMatrix;
 use mesh_io::{Face, Point, TriMesh};
-use qem_simplify::{SimplifyConfig, Target, simplify};
+use qem_simplify::{RemeshConfig, SimplifyConfig, Target, remesh, simplify};
 use serde::{Deserialize, Serialize};
 
 /// Settings of [`Hierarchy::build`].
@@ -19,7 +19,8 @@ pub struct HierarchyConfig {
     /// Fraction of vertices kept per pooling step, in (0, 1] (the paper: 0.5).
     pub ratio: f64,
     pub lambda_max: LambdaMax,
-    /// De-pooling of mean poolers (ignored by `sampling`, which up-samples, and `none`).
+    /// De-pooling of mean poolers (`ours`, `qem`, `max`, `remesh`; ignored by `sampling`, which
+    /// up-samples, `graph`, which averages over overlapping neighbourhoods, and `none`).
     pub depool: DepoolMode,
 }
 
@@ -75,10 +76,12 @@ pub struct Hierarchy {
 }
 
 impl Hierarchy {
-    /// Builds the hierarchy of `template`: each pooling step simplifies the previous level to
-    /// `ratio` of its vertices (λ by pooler) and builds that step's operators.
+    /// Builds the hierarchy of `template`: each pooling step simplifies (λ by pooler) or, for
+    /// `remesh`, remeshes the previous level to `ratio` of its vertices and builds that step's
+    /// operators.
     ///
-    /// Errors: an invalid template or configuration, or a simplification that fails.
+    /// Errors: an invalid template or configuration, or a simplification or remeshing that
+    /// fails.
     pub fn build(template: &TriMesh, config: &HierarchyConfig) -> Result<Self, HierarchyError> {
         template.validate(std::path::Path::new("<template>"))?;
         if !(config.ratio.is_finite() && config.ratio > 0.0 && config.ratio <= 1.0) {
@@ -97,37 +100,13 @@ impl Hierarchy {
         let mut pooling = Vec::with_capacity(config.levels);
         for _ in 0..config.levels {
             let fine = &levels[levels.len() - 1];
-            let n = fine.vertex_count;
-            let Some(lambda) = config.pooler.lambda() else {
-                pooling.push(PoolingOp::identity(n));
-                levels.push(fine.clone());
-                continue;
-            };
-            let fine_mesh = fine.mesh();
-            let simplified = simplify(
-                &fine_mesh,
-                &SimplifyConfig {
-                    target: Target::Ratio(config.ratio),
-                    lambda,
-                },
-            )?;
-            let m = simplified.coarse.vertex_count();
-            let op = match config.pooler {
-                Pooler::Sampling => PoolingOp {
-                    kind: Pooler::Sampling,
-                    pool: sampling::selection(&simplified.survivors, n)?,
-                    depool: sampling::upsampling(
-                        &fine_mesh.positions,
-                        &simplified.cluster_of,
-                        &simplified.coarse.positions,
-                        &simplified.coarse.faces,
-                    )?,
-                    clusters: None,
-                },
-                kind => PoolingOp::from_clusters(kind, &simplified.cluster_of, m, config.depool)?,
+            let (op, coarse) = match config.pooler {
+                Pooler::None => (PoolingOp::identity(fine.vertex_count), fine.clone()),
+                Pooler::Remesh => remesh_step(&fine.mesh(), config)?,
+                _ => simplify_step(&fine.mesh(), config)?,
             };
             pooling.push(op);
-            levels.push(Level::of(&simplified.coarse, config.lambda_max));
+            levels.push(coarse);
         }
         Ok(Self {
             levels,
@@ -184,7 +163,83 @@ impl Hierarchy {
                     "pooling {i}: clusters do not match {m} coarse of {n}"
                 ));
             }
+            // A max over an empty neighbourhood, or a fine vertex in none, would silently
+            // give zeros.
+            if op.kind == Pooler::Graph {
+                let mut covered = vec![false; n];
+                op.pool
+                    .indices()
+                    .iter()
+                    .for_each(|&u| covered[u as usize] = true);
+                let empty = (0..m).any(|c| op.pool.row(c).0.is_empty());
+                if empty || covered.contains(&false) {
+                    return Err(format!(
+                        "pooling {i}: a graph neighbourhood is empty or a fine vertex is in none"
+                    ));
+                }
+            }
         }
         Ok(())
     }
+}
+
+/// One pooling step of a simplification-based pooler: the simplified level and its operators.
+fn simplify_step(
+    fine_mesh: &TriMesh,
+    config: &HierarchyConfig,
+) -> Result<(PoolingOp, Level), HierarchyError> {
+    let lambda = config
+        .pooler
+        .lambda()
+        .ok_or(HierarchyError::InvalidArgument {
+            argument: "pooler",
+            message: format!("{} does not simplify", config.pooler),
+        })?;
+    let n = fine_mesh.vertex_count();
+    let simplified = simplify(
+        fine_mesh,
+        &SimplifyConfig {
+            target: Target::Ratio(config.ratio),
+            lambda,
+        },
+    )?;
+    let m = simplified.coarse.vertex_count();
+    let op = match config.pooler {
+        Pooler::Sampling => PoolingOp {
+            kind: Pooler::Sampling,
+            pool: sampling::selection(&simplified.survivors, n)?,
+            depool: sampling::upsampling(
+                &fine_mesh.positions,
+                &simplified.cluster_of,
+                &simplified.coarse.positions,
+                &simplified.coarse.faces,
+            )?,
+            clusters: None,
+        },
+        Pooler::Graph => PoolingOp::graph(
+            &fine_mesh.faces,
+            &simplified.survivors,
+            &simplified.cluster_of,
+        )?,
+        kind => PoolingOp::from_clusters(kind, &simplified.cluster_of, m, config.depool)?,
+    };
+    Ok((op, Level::of(&simplified.coarse, config.lambda_max)))
+}
+
+/// One pooling step of uniform remeshing: the remeshed level and mean pooling over the fine
+/// vertices' clusters (de-pooling as `config.depool`).
+fn remesh_step(
+    fine_mesh: &TriMesh,
+    config: &HierarchyConfig,
+) -> Result<(PoolingOp, Level), HierarchyError> {
+    let remeshed = remesh(
+        fine_mesh,
+        &RemeshConfig {
+            target: Target::Ratio(config.ratio),
+            ..Default::default()
+        },
+    )?;
+    let m = remeshed.coarse.vertex_count();
+    let op = PoolingOp::from_clusters(Pooler::Remesh, &remeshed.cluster_of, m, config.depool)?;
+    Ok((op, Level::of(&remeshed.coarse, config.lambda_max)))
 }

@@ -16,6 +16,13 @@
 //! - `sampling` (CoMA): keep the survivors of classical QEM; up-sample by barycentric
 //!   coordinates in the nearest coarse triangle (see [`sampling`]).
 //! - `none`: identity operators; every level is the template.
+//! - `graph` (Shen et al. 2018): our simplifier's coarse level; each coarse vertex takes the
+//!   channel-wise max over its survivor's closed one-ring ∪ its cluster (overlapping
+//!   neighbourhoods, see [`graph`]); de-pooling averages over the neighbourhoods containing a
+//!   fine vertex.
+//! - `remesh`: a uniform remeshing as the coarse level, mean pooling over its clusters.
+//!
+//! [`Pooler`]'s documentation gives the exact definitions of the last two.
 //!
 //! ```
 //! use mesh_hierarchy::{Hierarchy, HierarchyConfig, Pooler};
@@ -31,6 +38,7 @@
 
 mod error;
 mod file;
+pub mod graph;
 mod hierarchy;
 pub mod laplacian;
 pub mod pooling;

@@ -8,6 +8,35 @@ use std::fmt;
 use std::str::FromStr;
 
 /// Which pooling a hierarchy uses (the paper's ablation, Table 3).
+///
+/// The two poolers added last, for the table's "Graph Pooling" and "Uniform Simp." columns:
+///
+/// **Graph pooling** ([`Pooler::Graph`]; Shen et al. 2018, KCNet). The coarse vertex set and
+/// coarse mesh are exactly those of [`Pooler::Ours`] (modified QEM, λ = 0.001: the simplifier's
+/// `survivors` and `coarse`). Coarse vertex c, with survivor s_c, pools over its neighbourhood
+/// N(c) = the closed one-ring of s_c on the fine graph ∪ the QEM cluster of c; the clusters
+/// partition the fine vertices, so every fine vertex is in some N(c).
+/// - Pool: `y[c, ch] = max over u ∈ N(c) of x[u, ch]` — the plain channel-wise max, as KCNet
+///   (not the signed largest magnitude of [`Pooler::Max`]); ties go to the lowest fine index.
+///   The gradient goes to the selected element, summed where one fine vertex is selected by
+///   several coarse vertices (the neighbourhoods overlap).
+/// - De-pool: `fine[v] = mean over {c : v ∈ N(c)} of coarse[c]`, a sparse n×m matrix whose
+///   rows sum to 1 (the configured [`DepoolMode`] does not apply).
+///
+/// Why this is a fair reading of the column: KCNet pools a point cloud by taking, for each
+/// point of a subsample, the max over its kNN neighbourhood on a graph of the points. Here the
+/// graph is the mesh itself (its one-rings are the natural neighbourhoods) and the subsample is
+/// our survivors, so the coarse level, the convolutions and everything else equal ours; the
+/// only difference to our pooling is max over overlapping neighbourhoods instead of mean over a
+/// partition. Adding the cluster to the one-ring only guarantees that no fine vertex is
+/// ignored.
+///
+/// **Uniform remeshing** ([`Pooler::Remesh`]). The coarse level is
+/// `qem_simplify::remesh` of the fine mesh to `ratio` of its vertices (a uniform, isotropic
+/// remeshing, the paper's `\cite{remesh}`), which also returns each fine vertex's coarse
+/// vertex; pooling is the mean over those clusters and de-pooling copies (or is Pᵀ, as the
+/// configured [`DepoolMode`]), i.e. exactly [`Pooler::Ours`]'s operators on another coarse
+/// level.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Pooler {
@@ -23,18 +52,32 @@ pub enum Pooler {
     Sampling,
     /// No pooling: identity operators, every level is the template.
     None,
+    /// Graph max pooling (Shen et al. 2018) over overlapping neighbourhoods of our survivors;
+    /// see the type's documentation.
+    Graph,
+    /// Uniform remeshing with mean pooling; see the type's documentation.
+    Remesh,
 }
 
 impl Pooler {
-    /// All poolers, in the ablation's order.
-    pub const ALL: [Pooler; 5] = [Self::Ours, Self::Qem, Self::Max, Self::Sampling, Self::None];
+    /// All poolers: the ablation's original five first, then graph pooling and remeshing.
+    pub const ALL: [Pooler; 7] = [
+        Self::Ours,
+        Self::Qem,
+        Self::Max,
+        Self::Sampling,
+        Self::None,
+        Self::Graph,
+        Self::Remesh,
+    ];
 
-    /// The simplifier's λ for this pooler (`None` for the no-pooling ablation).
+    /// The simplifier's λ for this pooler (`None` for the poolers that do not run the
+    /// simplifier: no pooling and remeshing).
     pub fn lambda(self) -> Option<f64> {
         match self {
-            Self::Ours | Self::Max => Some(qem_simplify::DEFAULT_LAMBDA),
+            Self::Ours | Self::Max | Self::Graph => Some(qem_simplify::DEFAULT_LAMBDA),
             Self::Qem | Self::Sampling => Some(0.0),
-            Self::None => Option::None,
+            Self::None | Self::Remesh => Option::None,
         }
     }
 }
@@ -47,13 +90,15 @@ impl fmt::Display for Pooler {
             Self::Max => "max",
             Self::Sampling => "sampling",
             Self::None => "none",
+            Self::Graph => "graph",
+            Self::Remesh => "remesh",
         })
     }
 }
 
 /// Why a pooler name was not recognised.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown pooler {0:?} (expected ours, mean, qem, max, sampling or none)")]
+#[error("unknown pooler {0:?} (expected ours, mean, qem, max, sampling, none, graph or remesh)")]
 pub struct UnknownPooler(pub String);
 
 impl FromStr for Pooler {
@@ -66,6 +111,8 @@ impl FromStr for Pooler {
             "max" => Ok(Self::Max),
             "sampling" => Ok(Self::Sampling),
             "none" => Ok(Self::None),
+            "graph" => Ok(Self::Graph),
+            "remesh" => Ok(Self::Remesh),
             _ => Err(UnknownPooler(s.to_owned())),
         }
     }
@@ -114,12 +161,16 @@ pub struct PoolingOp {
     /// Which pooler built it.
     pub kind: Pooler,
     /// m×n: coarse = pool · fine (mean pooling, or selection for sampling). For `Max` this is
-    /// the mean matrix too; [`PoolingOp::pool`] applies the max instead.
+    /// the mean matrix too, and for `Graph` the mean over each neighbourhood N(c) (its pattern
+    /// is the membership: row c's columns are N(c)); [`PoolingOp::pool`] applies the max over
+    /// each row's columns instead.
     pub pool: CsrMatrix,
-    /// n×m: fine = depool · coarse (copy, Pᵀ, or barycentric up-sampling).
+    /// n×m: fine = depool · coarse (copy, Pᵀ, barycentric up-sampling, or for `Graph` the mean
+    /// over the neighbourhoods containing the fine vertex).
     pub depool: CsrMatrix,
-    /// Members (fine indices, ascending) of each coarse vertex's cluster; `None` for sampling
-    /// and no pooling.
+    /// Members (fine indices, ascending) of each coarse vertex's cluster (for `Graph`, the
+    /// simplifier's clusters that the neighbourhoods extend); `None` for sampling and no
+    /// pooling.
     pub clusters: Option<Vec<Vec<u32>>>,
 }
 
@@ -135,7 +186,8 @@ impl PoolingOp {
     }
 
     /// Mean pooling (and max, for `kind == Max`) over the clusters given by `cluster_of`
-    /// (fine → coarse, every coarse index in 0..coarse_count used).
+    /// (fine → coarse, every coarse index in 0..coarse_count used): the operators of `ours`,
+    /// `qem`, `max` and `remesh`.
     pub fn from_clusters(
         kind: Pooler,
         cluster_of: &[u32],
@@ -185,29 +237,72 @@ impl PoolingOp {
     }
 
     /// Pools `channels` interleaved channels (`fine.len() == n · channels`, vertex-major):
-    /// the member of largest magnitude with its sign for `Max` (ties: the negative one, as the
-    /// authors' code), `pool · fine` otherwise. Errors when `fine` has not n · channels values.
+    /// for `Max` the member of largest magnitude with its sign (ties: the negative one, as the
+    /// authors' code), for `Graph` the largest value over the neighbourhood (ties: the lowest
+    /// fine index), `pool · fine` otherwise. Errors when `fine` has not n · channels values.
     pub fn pool(&self, fine: &[f64], channels: usize) -> Result<Vec<f64>, HierarchyError> {
         check_len("fine", fine, self.fine_count(), channels)?;
-        Ok(match (&self.kind, &self.clusters) {
-            (Pooler::Max, Some(clusters)) => {
-                let mut out = vec![0.0; clusters.len() * channels];
-                for (c, members) in clusters.iter().enumerate() {
-                    for k in 0..channels {
-                        let mut best = 0.0f64;
-                        for &v in members {
-                            let x = fine[v as usize * channels + k];
-                            if x.abs() > best.abs() || (x.abs() == best.abs() && x < best) {
-                                best = x;
-                            }
-                        }
-                        out[c * channels + k] = best;
-                    }
-                }
-                out
-            }
+        Ok(match self.kind {
+            Pooler::Max | Pooler::Graph => self.select(fine, channels).0,
             _ => apply(&self.pool, fine, channels),
         })
+    }
+
+    /// The gradient of [`Self::pool`] at `fine`: ∂⟨upstream, pool(fine)⟩/∂fine, `[n, channels]`
+    /// for `upstream` `[m, channels]`. For `Max` and `Graph` each upstream value goes to the
+    /// selected fine value (summed where one is selected several times), otherwise it is
+    /// poolᵀ · upstream. Errors when a slice has the wrong length.
+    pub fn pool_gradient(
+        &self,
+        fine: &[f64],
+        upstream: &[f64],
+        channels: usize,
+    ) -> Result<Vec<f64>, HierarchyError> {
+        check_len("fine", fine, self.fine_count(), channels)?;
+        check_len("upstream", upstream, self.coarse_count(), channels)?;
+        Ok(match self.kind {
+            Pooler::Max | Pooler::Graph => {
+                let (_, picked) = self.select(fine, channels);
+                let mut grad = vec![0.0; fine.len()];
+                for (i, (&u, &g)) in picked.iter().zip(upstream).enumerate() {
+                    if u != u32::MAX {
+                        grad[u as usize * channels + i % channels] += g;
+                    }
+                }
+                grad
+            }
+            _ => apply(&self.pool.transpose(), upstream, channels),
+        })
+    }
+
+    /// Max-type pooling over the columns of each row of `pool` (signed magnitude for `Max`,
+    /// plain for `Graph`): the values and the selected fine vertices (`u32::MAX`, value 0, for
+    /// an empty row). Members are visited in ascending order and only a strictly better one
+    /// replaces the best so far, so ties go to the lowest index.
+    fn select(&self, fine: &[f64], channels: usize) -> (Vec<f64>, Vec<u32>) {
+        let m = self.coarse_count();
+        let mut out = vec![0.0; m * channels];
+        let mut picked = vec![u32::MAX; m * channels];
+        let signed = self.kind == Pooler::Max;
+        for c in 0..m {
+            for k in 0..channels {
+                let (best, at) = (&mut out[c * channels + k], &mut picked[c * channels + k]);
+                for &v in self.pool.row(c).0 {
+                    let (x, b): (f64, f64) = (fine[v as usize * channels + k], *best);
+                    let better = *at == u32::MAX
+                        || if signed {
+                            x.abs() > b.abs() || (x.abs() == b.abs() && x < b)
+                        } else {
+                            x > b
+                        };
+                    if better {
+                        *best = x;
+                        *at = v;
+                    }
+                }
+            }
+        }
+        (out, picked)
     }
 
     /// De-pools `channels` interleaved channels: `depool · coarse`. Errors when `coarse` has not

@@ -1,6 +1,9 @@
 //! Acceptance tests of the hierarchy: operators against dense references built here from the
 //! simplifier's `cluster_of`, composition of two levels, Laplacians, files.
 
+mod common;
+
+use common::*;
 use mesh_hierarchy::sampling::closest_on_triangle;
 use mesh_hierarchy::{
     DepoolMode, Hierarchy, HierarchyConfig, HierarchyError, LambdaMax, Pooler, normalized_laplacian,
@@ -8,33 +11,6 @@ use mesh_hierarchy::{
 use mesh_io::TriMesh;
 use qem_simplify::shapes::{bumpy_grid, icosphere, torus};
 use qem_simplify::{SimplifyConfig, Target, simplify};
-
-fn meshes() -> Vec<TriMesh> {
-    vec![icosphere(2), torus(12, 8, 1.0, 0.3), bumpy_grid(12, 10)]
-}
-
-fn config(pooler: Pooler, levels: usize) -> HierarchyConfig {
-    HierarchyConfig {
-        pooler,
-        levels,
-        ..Default::default()
-    }
-}
-
-/// A deterministic, non-constant field.
-fn field(n: usize, channels: usize) -> Vec<f64> {
-    (0..n * channels)
-        .map(|i| ((i * 37 % 101) as f64 - 50.0) / 7.0)
-        .collect()
-}
-
-fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol)
-}
-
-fn temp_path(name: &str) -> std::path::PathBuf {
-    std::env::temp_dir().join(format!("mesh-hierarchy-{}-{name}", std::process::id()))
-}
 
 #[test]
 fn constant_fields_survive_every_pooler() {
@@ -58,7 +34,13 @@ fn constant_fields_survive_every_pooler() {
 #[test]
 fn mean_pool_after_copy_depool_is_identity() {
     for mesh in meshes() {
-        for pooler in [Pooler::Ours, Pooler::Qem, Pooler::Max, Pooler::None] {
+        for pooler in [
+            Pooler::Ours,
+            Pooler::Qem,
+            Pooler::Max,
+            Pooler::None,
+            Pooler::Remesh,
+        ] {
             let h = Hierarchy::build(&mesh, &config(pooler, 2)).unwrap();
             for op in &h.pooling {
                 let x = field(op.coarse_count(), 3);
@@ -69,26 +51,6 @@ fn mean_pool_after_copy_depool_is_identity() {
             }
         }
     }
-}
-
-/// Dense P (mean) and D (copy or Pᵀ) built from `cluster_of` alone.
-fn dense_reference(cluster_of: &[u32], m: usize, mode: DepoolMode) -> [Vec<Vec<f64>>; 2] {
-    let n = cluster_of.len();
-    let mut size = vec![0.0; m];
-    for &c in cluster_of {
-        size[c as usize] += 1.0;
-    }
-    let mut p = vec![vec![0.0; n]; m];
-    let mut d = vec![vec![0.0; m]; n];
-    for (v, &c) in cluster_of.iter().enumerate() {
-        let c = c as usize;
-        p[c][v] = 1.0 / size[c];
-        d[v][c] = match mode {
-            DepoolMode::Copy => 1.0,
-            DepoolMode::Transpose => 1.0 / size[c],
-        };
-    }
-    [p, d]
 }
 
 #[test]
@@ -340,9 +302,14 @@ fn horse_gallop_template_builds_one_level() {
     };
     let set = mesh_io::load_set(&dir).unwrap().value;
     let template = set.template();
-    for pooler in [Pooler::Ours, Pooler::Sampling] {
+    for pooler in [
+        Pooler::Ours,
+        Pooler::Sampling,
+        Pooler::Graph,
+        Pooler::Remesh,
+    ] {
         let h = Hierarchy::build(&template, &config(pooler, 1)).unwrap();
-        assert_eq!(h.vertex_counts(), vec![8431, 4216]);
+        assert_eq!(h.vertex_counts(), vec![8431, 4216], "{pooler}");
         assert!(h.check_shapes().is_ok());
         let ones = vec![1.0; 4216];
         assert!(close(

@@ -31,8 +31,9 @@ pub struct TrainArgs {
     /// Convolution: spectral (Chebyshev) or spatial [default: spectral].
     #[arg(long)]
     conv: Option<ConvKind>,
-    /// Pooling: mean (ours: modified QEM), max, qem (classical QEM), sampling (CoMA), none
-    /// [default: mean].
+    /// Pooling: mean (ours: modified QEM), max, qem (classical QEM), sampling (CoMA), remesh
+    /// (uniform remeshing, mean over nearest-vertex clusters), graph (graph max pooling, Shen
+    /// et al. 2018), none [default: mean].
     #[arg(long)]
     pool: Option<PoolKind>,
     /// Meshes per step [default: 50].

@@ -38,10 +38,27 @@ pub enum PoolKind {
     Sampling,
     /// No pooling: every level is the template (the authors' no-pooling ablation).
     None,
+    /// Graph max pooling (Shen et al. 2018): our simplification's coarse level, the plain
+    /// channel-wise max over overlapping neighbourhoods (survivor's one-ring ∪ cluster),
+    /// de-pooling by the mean over the neighbourhoods containing a vertex
+    /// (see [`mesh_hierarchy::Pooler`]).
+    Graph,
+    /// Uniform remeshing as the coarse level, mean pooling over its clusters.
+    Remesh,
 }
 
 impl PoolKind {
-    pub const ALL: [PoolKind; 5] = [Self::Mean, Self::Max, Self::Qem, Self::Sampling, Self::None];
+    /// Every pooling: the original five first (older plans index them), then the two added
+    /// for the ablation's graph-pooling and uniform-remeshing columns.
+    pub const ALL: [PoolKind; 7] = [
+        Self::Mean,
+        Self::Max,
+        Self::Qem,
+        Self::Sampling,
+        Self::None,
+        Self::Graph,
+        Self::Remesh,
+    ];
 }
 
 macro_rules! names {
@@ -70,7 +87,7 @@ macro_rules! names {
 
 names!(ConvKind, "conv", Spectral => "spectral", Spatial => "spatial");
 names!(PoolKind, "pool", Mean => "mean", Max => "max", Qem => "qem", Sampling => "sampling",
-    None => "none");
+    None => "none", Graph => "graph", Remesh => "remesh");
 
 /// The network's configuration. `Default` is the paper's network as the authors' code runs it
 /// (see /work/shared/notes/authors-code.md §4), except `last_encoder_linear`, which follows the
@@ -145,6 +162,8 @@ impl ModelConfig {
             PoolKind::Max => Pooler::Max,
             PoolKind::Sampling => Pooler::Sampling,
             PoolKind::None => Pooler::None,
+            PoolKind::Graph => Pooler::Graph,
+            PoolKind::Remesh => Pooler::Remesh,
         }
     }
 
@@ -301,9 +320,21 @@ mod tests {
                 Pooler::Max,
                 Pooler::Qem,
                 Pooler::Sampling,
-                Pooler::None
+                Pooler::None,
+                Pooler::Graph,
+                Pooler::Remesh
             ]
         );
+        assert_eq!("graph".parse::<PoolKind>().unwrap(), PoolKind::Graph);
+        assert_eq!("Remesh".parse::<PoolKind>().unwrap(), PoolKind::Remesh);
+        let json = serde_json::to_string(&PoolKind::Graph).unwrap();
+        assert_eq!(json, "\"graph\"");
+        assert_eq!(
+            serde_json::from_str::<PoolKind>("\"remesh\"").unwrap(),
+            PoolKind::Remesh
+        );
+        let err = "kcnet".parse::<PoolKind>().unwrap_err().to_string();
+        assert!(err.contains("graph") && err.contains("remesh"), "{err}");
     }
 
     #[test]

@@ -30,7 +30,8 @@ use candle_core::{DType, Device, Tensor, Var};
 use layers::{ConvBlock, Down, GraphConv, LevelOps, Up, Weights};
 use mesh_hierarchy::{Hierarchy, adjacency};
 use spectral_conv::{
-    ChebConv, DePool, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv, neighbour_mean_matrix,
+    ChebConv, DePool, MaxMode, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv,
+    neighbour_mean_matrix,
 };
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -189,12 +190,19 @@ impl MeshVae {
         let (mut down, mut up) = (Vec::new(), Vec::new());
         for op in &hierarchy.pooling[..n_levels - 1] {
             let (d, u) = match config.pool {
-                PoolKind::Mean | PoolKind::Qem => (
+                // Remeshing only changes the coarse level: its operators are mean pooling's.
+                PoolKind::Mean | PoolKind::Qem | PoolKind::Remesh => (
                     Down::Mean(MeanPool::new(&op.pool, device)?),
                     Up::DePool(DePool::new(&op.depool, device)?),
                 ),
                 PoolKind::Max => (
                     Down::Max(MaxPool::new(&op.pool, device)?),
+                    Up::DePool(DePool::new(&op.depool, device)?),
+                ),
+                // The plain max over each neighbourhood (the pooling matrix's rows), then the
+                // mean over the neighbourhoods containing each fine vertex.
+                PoolKind::Graph => (
+                    Down::Max(MaxPool::with_mode(&op.pool, MaxMode::Plain, device)?),
                     Up::DePool(DePool::new(&op.depool, device)?),
                 ),
                 PoolKind::Sampling => (

@@ -10,8 +10,9 @@
 
 use crate::cheb_kernel::{self, Bufs, ChebShape, MAX_K, Need};
 use crate::error::{ConvError, Result};
-use crate::kernel::{Csr, Real, max_pool, max_unpool, spmm_axpby};
+use crate::kernel::{Csr, Real, spmm_axpby};
 use crate::layout::{Blocks, Io};
+use crate::max_kernel::{max_pool, max_unpool};
 use crate::pool::MaxPool;
 use crate::spmm::SparseOp;
 use std::sync::Arc;
@@ -246,9 +247,10 @@ fn split_terms<T>(terms: &mut [T], k: usize, size: usize) -> Vec<&mut [T]> {
 }
 
 impl MaxPool {
-    /// Signed max-magnitude pooling of x `[fine, n]` into y `[coarse, n]` (every one of a
-    /// vertex's n values pooled on its own, as [`MaxPool::forward_vertex_major`]); `arg`
-    /// (`[coarse, n]`) receives the selected fine vertex (`u32::MAX` for an empty cluster).
+    /// Max pooling (the layer's [`MaxPool::mode`]) of x `[fine, n]` into y `[coarse, n]`
+    /// (every one of a vertex's n values pooled on its own, as
+    /// [`MaxPool::forward_vertex_major`]); `arg` (`[coarse, n]`) receives the selected fine
+    /// vertex (`u32::MAX` for an empty cluster).
     pub fn forward_into<T: Float>(
         &self,
         x: &[T],
@@ -261,12 +263,13 @@ impl MaxPool {
         check_len(OP, "x", x.len(), p.cols * n)?;
         check_len(OP, "y", y.len(), p.rows * n)?;
         check_len(OP, "arg", arg.len(), p.rows * n)?;
-        max_pool(p, x, y, arg, n);
+        max_pool(p, x, y, arg, n, self.mode());
         Ok(())
     }
 
     /// The adjoint of [`Self::forward_into`]: dx `[fine, n]` (overwritten) gets g `[coarse, n]`
-    /// at the selected members.
+    /// at the selected members, summed where a member was selected several times
+    /// (overlapping member lists).
     pub fn backward_into<T: Float>(
         &self,
         arg: &[u32],
@@ -279,8 +282,7 @@ impl MaxPool {
         check_len(OP, "g", g.len(), p.rows * n)?;
         check_len(OP, "arg", arg.len(), p.rows * n)?;
         check_len(OP, "dx", dx.len(), p.cols * n)?;
-        dx.fill(T::ZERO);
-        max_unpool(arg, g, dx, (p.rows, p.cols), n);
+        max_unpool(self.pattern_t(), arg, g, dx, n);
         Ok(())
     }
 }
@@ -440,5 +442,154 @@ mod tests {
         let lhs: f64 = g.iter().zip(&py).map(|(a, b)| a * b).sum();
         let rhs: f64 = dx.iter().zip(&x).map(|(a, b)| a * b).sum();
         assert!((lhs - rhs).abs() < 1e-10 * lhs.abs().max(1.0));
+    }
+
+    #[test]
+    fn graph_max_pool_buffers_match_the_candle_op_and_its_gradient() {
+        // Overlapping member lists: each coarse vertex takes a random ~10% of 70 fine ones.
+        let m = random_matrix(30, 70, 0.1, 11);
+        let pool = MaxPool::with_mode(&m, crate::MaxMode::Plain, &Device::Cpu).unwrap();
+        let n = 6;
+        let x = random_vec(70 * n, 12);
+        let g = random_vec(30 * n, 13);
+        let (mut y, mut arg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
+        pool.forward_into(&x, &mut y, &mut arg, n).unwrap();
+        let xt = candle_core::Var::from_vec(x.clone(), (70, 1, n), &Device::Cpu).unwrap();
+        let yt = pool.forward_vertex_major(xt.as_tensor()).unwrap();
+        let want: Vec<f64> = yt.flatten_all().unwrap().to_vec1().unwrap();
+        assert_eq!(y, want);
+        let gt = Tensor::from_vec(g.clone(), (30, 1, n), &Device::Cpu).unwrap();
+        let grads = (yt * gt).unwrap().sum_all().unwrap().backward().unwrap();
+        let want_dx: Vec<f64> = grads
+            .get(xt.as_tensor())
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let mut dx = vec![9.0; 70 * n];
+        pool.backward_into(&arg, &g, &mut dx, n).unwrap();
+        for (p, q) in dx.iter().zip(&want_dx) {
+            assert!((p - q).abs() < 1e-14, "{p} vs {q}");
+        }
+        // Some fine vertex was selected by more than one row and got the sum.
+        let mut times = vec![0usize; 70 * n];
+        for (i, &j) in arg.iter().enumerate() {
+            if j != u32::MAX {
+                times[j as usize * n + i % n] += 1;
+            }
+        }
+        assert!(times.iter().any(|&t| t > 1));
+        assert!(pool.backward_into(&arg, &g[1..], &mut dx, n).is_err());
+    }
+
+    #[test]
+    fn max_pool_blocks_match_a_plain_loop_and_unpool_is_the_same_on_any_thread_count() {
+        // 40 values per vertex: two blocks of 16 and a tail of 8 in the forward kernel.
+        let m = random_matrix(50, 120, 0.08, 14);
+        let n = 40;
+        let x = random_vec(120 * n, 15);
+        let g = random_vec(50 * n, 16);
+        for mode in [crate::MaxMode::Plain, crate::MaxMode::SignedMagnitude] {
+            let pool = MaxPool::with_mode(&m, mode, &Device::Cpu).unwrap();
+            let (mut y, mut arg) = (vec![0.0; 50 * n], vec![0u32; 50 * n]);
+            pool.forward_into(&x, &mut y, &mut arg, n).unwrap();
+            for r in 0..50 {
+                for k in 0..n {
+                    let (mut best, mut at) = (0.0f64, u32::MAX);
+                    for &j in m.row(r).0 {
+                        let v = x[j as usize * n + k];
+                        let better = match mode {
+                            crate::MaxMode::Plain => v > best,
+                            crate::MaxMode::SignedMagnitude => {
+                                v.abs() > best.abs() || (v.abs() == best.abs() && v < best)
+                            }
+                        };
+                        if at == u32::MAX || better {
+                            (best, at) = (v, j);
+                        }
+                    }
+                    assert_eq!((y[r * n + k], arg[r * n + k]), (best, at), "{mode:?}");
+                }
+            }
+            let run = |threads: usize| {
+                let mut dx = vec![0.0; 120 * n];
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap()
+                    .install(|| pool.backward_into(&arg, &g, &mut dx, n).unwrap());
+                dx
+            };
+            let one = run(1);
+            assert_eq!(one, run(2));
+            assert_eq!(one, run(5));
+            // And it is the plain scatter-add.
+            let mut want = vec![0.0; 120 * n];
+            for (i, &j) in arg.iter().enumerate() {
+                if j != u32::MAX {
+                    want[j as usize * n + i % n] += g[i];
+                }
+            }
+            assert_eq!(one, want);
+        }
+    }
+
+    /// Timing probe (not a test of results): `cargo test --release -p spectral-conv --lib --
+    /// --ignored --nocapture graph_pool_timing_probe`. Graph max pooling on a 205×205 grid
+    /// (clusters of two vertices, so about half survive) at n = 288 values per vertex (B = 32,
+    /// C = 9), against mean pooling over the same clusters.
+    #[test]
+    #[ignore]
+    fn graph_pool_timing_probe() {
+        let (rows, cols) = (205usize, 205usize);
+        let v = rows * cols;
+        let faces = crate::test_util::grid_faces(rows, cols);
+        let half = cols.div_ceil(2);
+        let cluster_of: Vec<u32> = (0..v)
+            .map(|u| ((u / cols) * half + (u % cols) / 2) as u32)
+            .collect();
+        let survivors: Vec<u32> = (0..rows * half)
+            .map(|c| ((c / half) * cols + (c % half) * 2) as u32)
+            .collect();
+        let members =
+            mesh_hierarchy::graph::neighbourhoods(&faces, &survivors, &cluster_of).unwrap();
+        let m = members.rows();
+        let n = 288;
+        let x: Vec<f32> = random_vec(v * n, 1).iter().map(|&a| a as f32).collect();
+        let pool = MaxPool::with_mode(&members, crate::MaxMode::Plain, &Device::Cpu).unwrap();
+        let signed = MaxPool::new(&members, &Device::Cpu).unwrap();
+        let (mut y, mut arg, mut dx) = (vec![0f32; m * n], vec![0u32; m * n], vec![0f32; v * n]);
+        // The fastest of 10 calls: the machine is shared.
+        let time = |label: &str, f: &mut dyn FnMut()| {
+            let mut best = f64::INFINITY;
+            for _ in 0..10 {
+                let t = std::time::Instant::now();
+                f();
+                best = best.min(t.elapsed().as_secs_f64() * 1e3);
+            }
+            println!("{label}: {best:.1} ms");
+        };
+        println!("{v} -> {m} vertices, {} memberships", members.nnz());
+        time("graph pool forward_into", &mut || {
+            pool.forward_into(&x, &mut y, &mut arg, n).unwrap()
+        });
+        time("signed max pool forward_into", &mut || {
+            signed.forward_into(&x, &mut y, &mut arg, n).unwrap()
+        });
+        time("graph pool backward_into", &mut || {
+            pool.backward_into(&arg, &y, &mut dx, n).unwrap()
+        });
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        time("graph pool backward_into, 1 thread", &mut || {
+            one.install(|| pool.backward_into(&arg, &y, &mut dx, n).unwrap())
+        });
+        let mean = SparseKernel::new(&SparseOp::new(&members, &Device::Cpu).unwrap());
+        time("sparse product, same pattern", &mut || {
+            mean.apply(&x, &mut y, n).unwrap()
+        });
     }
 }

@@ -452,70 +452,6 @@ fn gather_chunk_body<T: Real, M: Madd>(
     dest.store(blocks);
 }
 
-/// Signed max-magnitude pooling: for every (b, p, ch), the member j of cluster p (the columns of
-/// row p of `pattern`) with the largest |x[b, j, ch]|; ties go to the negative value, then to the
-/// lowest vertex index. Writes the value to `out` `[B, P, c]` and j to `arg` (`u32::MAX` and 0
-/// for an empty cluster).
-pub(crate) fn max_pool<T: Real>(pattern: &Csr, x: &[T], out: &mut [T], arg: &mut [u32], c: usize) {
-    let (rows, cols) = (pattern.rows, pattern.cols);
-    if c == 0 || rows == 0 {
-        return;
-    }
-    out.par_chunks_mut(CHUNK_ROWS * c)
-        .zip(arg.par_chunks_mut(CHUNK_ROWS * c))
-        .enumerate()
-        .for_each(|(chunk, (out, arg))| {
-            let first = chunk * CHUNK_ROWS;
-            for (local, (y, am)) in out
-                .chunks_exact_mut(c)
-                .zip(arg.chunks_exact_mut(c))
-                .enumerate()
-            {
-                let g = first + local;
-                let (b, p) = (g / rows, g % rows);
-                let xb = &x[b * cols * c..][..cols * c];
-                y.fill(T::ZERO);
-                am.fill(u32::MAX);
-                for &j in pattern.row::<T>(p).0 {
-                    let xj = &xb[j as usize * c..][..c];
-                    for ((z, m), &v) in y.iter_mut().zip(am.iter_mut()).zip(xj) {
-                        let better =
-                            *m == u32::MAX || v.abs() > z.abs() || (v.abs() == z.abs() && v < *z);
-                        if better {
-                            *z = v;
-                            *m = j;
-                        }
-                    }
-                }
-            }
-        });
-}
-
-/// The adjoint of [`max_pool`]: dx[b, arg[b, p, ch], ch] += g[b, p, ch], with `g` `[B, rows, c]`
-/// and `dx` `[B, cols, c]`.
-pub(crate) fn max_unpool<T: Real>(
-    arg: &[u32],
-    g: &[T],
-    dx: &mut [T],
-    (rows, cols): (usize, usize),
-    c: usize,
-) {
-    if c == 0 || rows == 0 || cols == 0 {
-        return;
-    }
-    dx.par_chunks_mut(cols * c)
-        .zip(g.par_chunks(rows * c).zip(arg.par_chunks(rows * c)))
-        .for_each(|(dxb, (gb, ab))| {
-            for (gp, ap) in gb.chunks_exact(c).zip(ab.chunks_exact(c)) {
-                for (ch, (&gv, &j)) in gp.iter().zip(ap).enumerate() {
-                    if j != u32::MAX {
-                        dxb[j as usize * c + ch] += gv;
-                    }
-                }
-            }
-        });
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -561,35 +497,5 @@ mod tests {
                 assert_eq!(cm[(i * c + o) * batch + b], x[(b * 270 + i) * c + o]);
             }
         }
-    }
-
-    #[test]
-    fn max_pool_picks_signed_largest_magnitude_and_unpool_scatters() {
-        // Clusters {0, 1}, {2, 3, 4}, {} over 5 vertices.
-        let p = CsrMatrix::from_triplets(
-            3,
-            5,
-            &[
-                (0, 0, 0.5),
-                (0, 1, 0.5),
-                (1, 2, 1.0),
-                (1, 3, 1.0),
-                (1, 4, 1.0),
-            ],
-        )
-        .unwrap();
-        let pat = Csr::from_matrix(&p);
-        // One batch, two channels.
-        let x = [1.0, -2.0, -3.0, 2.0, 0.5, 4.0, -0.5, -4.0, 0.25, 1.0f64];
-        let mut out = [9.0; 6];
-        let mut arg = [7u32; 6];
-        max_pool(&pat, &x, &mut out, &mut arg, 2);
-        // Ties in magnitude (-2 vs 2, 0.5 vs -0.5, 4 vs -4) go to the negative value.
-        assert_eq!(out, [-3.0, -2.0, -0.5, -4.0, 0.0, 0.0]);
-        assert_eq!(arg, [1, 0, 3, 3, u32::MAX, u32::MAX]);
-        let g = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-        let mut dx = [0.0; 10];
-        max_unpool(&arg, &g, &mut dx, (3, 5), 2);
-        assert_eq!(dx, [0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 3.0, 4.0, 0.0, 0.0]);
     }
 }

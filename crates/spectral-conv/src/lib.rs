@@ -5,7 +5,8 @@
 //! tensors `[B, V, C]` (or `[V, C]`), f32 or f64.
 //! **Out:** differentiable layers: [`SparseOp`] (y = A x), [`ChebConv`]
 //! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`MeanPool`],
-//! [`DePool`], [`Sampling`] and [`MaxPool`].
+//! [`DePool`], [`Sampling`] and [`MaxPool`] (signed largest magnitude per cluster, or with
+//! [`MaxMode::Plain`] graph max pooling over overlapping neighbourhoods).
 //!
 //! Training time is spent in these sparse products, and candle has no sparse tensors, so on the
 //! CPU they are custom ops with hand-written rayon kernels ([`Backend::Kernel`]; ChebConv is one
@@ -57,6 +58,7 @@ mod cheb_op;
 mod error;
 mod kernel;
 mod layout;
+mod max_kernel;
 mod mix;
 mod order;
 mod pool;
@@ -73,6 +75,7 @@ mod vertex_major_tests;
 pub use buffers::{ChebKernel, ConvDims, Float, SparseKernel};
 pub use cheb::{ChebConfig, ChebConv};
 pub use error::{ConvError, Result};
+pub use max_kernel::MaxMode;
 pub use mesh_hierarchy::CsrMatrix;
 pub use order::{inverse_order, locality_order, permute_symmetric};
 pub use pool::{DePool, MaxPool, MeanPool, Sampling};

@@ -4,13 +4,16 @@
 //!   (divide by cluster size) or a copy matrix.
 //! - [`Sampling`]: CoMA down- or up-sampling matrices.
 //! - [`MaxPool`]: per channel, the member of each cluster with the largest magnitude, sign kept
-//!   (as the authors' max pooling); the gradient goes to the selected member only.
+//!   (as the authors' max pooling), or ([`MaxMode::Plain`]) the largest value over overlapping
+//!   neighbourhoods (graph max pooling, Shen et al. 2018); the gradient goes to the selected
+//!   member only, summed where one member is selected several times.
 //!
 //! The first three are [`SparseOp`] products; `MaxPool` is a custom op that records the selected
 //! members for its backward pass, with a candle-ops fallback for other devices.
 
 use crate::error::{ConvError, Result};
-use crate::kernel::{Csr, Real, max_pool, max_unpool};
+use crate::kernel::{Csr, Real};
+use crate::max_kernel::{MaxMode, max_pool, max_unpool};
 use crate::spmm::{Backend, SparseOp, contiguous_span, use_kernel};
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Storage, Tensor};
@@ -69,15 +72,21 @@ sparse_layer!(
     "sampling"
 );
 
-/// Signed max-magnitude pooling over the clusters given by a pooling matrix's rows (its
-/// sparsity pattern; values are ignored). An empty cluster yields 0.
+/// Max pooling over the member lists given by a pooling matrix's rows (its sparsity pattern;
+/// values are ignored; rows may overlap). An empty row yields 0.
 ///
-/// Ties: the negative value wins a tie in magnitude, then the lowest vertex index; on the
-/// fallback path an exact tie between equal values may give the gradient to another of the tied
-/// members (the output is the same).
+/// [`MaxMode::SignedMagnitude`] ([`MaxPool::new`]): the member of largest magnitude, sign
+/// kept; ties go to the negative value, then the lowest vertex index. [`MaxMode::Plain`]
+/// ([`MaxPool::with_mode`]; graph pooling): the largest value; ties go to the lowest vertex
+/// index. On the fallback path, in signed-magnitude mode, an exact tie between equal values
+/// may give the gradient to another of the tied members (the output is the same); in plain
+/// mode it selects exactly as the kernel.
 #[derive(Debug, Clone)]
 pub struct MaxPool {
     pattern: Arc<Csr>,
+    /// The transposed pattern (fine vertex → the rows holding it), for the backward pass.
+    pattern_t: Arc<Csr>,
+    mode: MaxMode,
     backend: Backend,
     device: Device,
     /// Fallback: the members of every cluster, padded to `width` (with the first member, or
@@ -89,8 +98,15 @@ pub struct MaxPool {
 }
 
 impl MaxPool {
-    /// Clusters from the rows of `pooling` (coarse × fine), for inputs on `device`.
+    /// Signed max-magnitude pooling over the rows of `pooling` (coarse × fine), for inputs on
+    /// `device`.
     pub fn new(pooling: &CsrMatrix, device: &Device) -> Result<Self> {
+        Self::with_mode(pooling, MaxMode::SignedMagnitude, device)
+    }
+
+    /// Max pooling of the given mode over the rows of `pooling` (coarse × fine; for graph
+    /// pooling its membership pattern), for inputs on `device`.
+    pub fn with_mode(pooling: &CsrMatrix, mode: MaxMode, device: &Device) -> Result<Self> {
         if pooling.cols() == 0 || pooling.cols() > u32::MAX as usize {
             return Err(ConvError::argument(
                 "MaxPool::new",
@@ -129,12 +145,19 @@ impl MaxPool {
         };
         Ok(Self {
             pattern: Arc::new(pattern),
+            pattern_t: Arc::new(Csr::from_matrix(&pooling.transpose())),
+            mode,
             backend: Backend::Kernel,
             device: device.clone(),
             members,
             width,
             nonempty,
         })
+    }
+
+    /// What the layer selects.
+    pub fn mode(&self) -> MaxMode {
+        self.mode
     }
 
     /// The same layer with another backend.
@@ -148,6 +171,11 @@ impl MaxPool {
     /// The clusters (the pooling matrix's pattern).
     pub(crate) fn pattern(&self) -> &Csr {
         &self.pattern
+    }
+
+    /// The transposed pattern: row j lists the clusters holding fine vertex j.
+    pub(crate) fn pattern_t(&self) -> &Csr {
+        &self.pattern_t
     }
 
     /// `[B, fine, C]` (or `[fine, C]`) → `[B, coarse, C]` (or `[coarse, C]`).
@@ -191,6 +219,8 @@ impl MaxPool {
         let y = if use_kernel(backend, &x3) {
             x3.contiguous()?.apply_op1(MaxPoolOp {
                 pattern: self.pattern.clone(),
+                pattern_t: self.pattern_t.clone(),
+                mode: self.mode,
                 arg: Mutex::new(None),
             })?
         } else {
@@ -220,18 +250,26 @@ impl MaxPool {
         Ok(y.reshape(dims)?)
     }
 
-    /// candle ops only: gather the padded clusters `[B, P, width, C]`, take the arg-max and the
-    /// arg-min per channel, keep the one of larger magnitude, and gather it (differentiable).
+    /// candle ops only: gather the padded clusters `[B, P, width, C]`, take the arg-max (plain
+    /// mode; candle's arg-max keeps the first of equal values, i.e. the lowest vertex) or the
+    /// arg-max and the arg-min, keeping the one of larger magnitude (signed magnitude), and
+    /// gather it (differentiable).
     fn fallback(&self, x: &Tensor) -> Result<Tensor> {
         let (batch, _, c) = x.dims3()?;
         let rows = self.pattern.rows;
         let grouped = x
             .index_select(&self.members, 1)?
             .reshape((batch, rows, self.width, c))?;
-        let (imax, imin) = (grouped.argmax_keepdim(2)?, grouped.argmin_keepdim(2)?);
-        let (vmax, vmin) = (grouped.gather(&imax, 2)?, grouped.gather(&imin, 2)?);
-        let take_min = vmin.abs()?.ge(&vmax.abs()?)?;
-        let pick = take_min.where_cond(&imin, &imax)?;
+        let imax = grouped.argmax_keepdim(2)?;
+        let pick = match self.mode {
+            MaxMode::Plain => imax,
+            MaxMode::SignedMagnitude => {
+                let imin = grouped.argmin_keepdim(2)?;
+                let (vmax, vmin) = (grouped.gather(&imax, 2)?, grouped.gather(&imin, 2)?);
+                let take_min = vmin.abs()?.ge(&vmax.abs()?)?;
+                take_min.where_cond(&imin, &imax)?
+            }
+        };
         let y = grouped.gather(&pick, 2)?.squeeze(2)?;
         Ok(match &self.nonempty {
             Some(mask) => y.broadcast_mul(&mask.to_dtype(x.dtype())?)?,
@@ -243,6 +281,8 @@ impl MaxPool {
 /// The custom op; keeps the selected members (`[B, P, C]` vertex indices) for `bwd`.
 struct MaxPoolOp {
     pattern: Arc<Csr>,
+    pattern_t: Arc<Csr>,
+    mode: MaxMode,
     arg: Mutex<Option<Arc<Vec<u32>>>>,
 }
 
@@ -259,7 +299,7 @@ impl MaxPoolOp {
         }
         let n = batch * self.pattern.rows * c;
         let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
-        max_pool(&self.pattern, x, &mut y, &mut arg, c);
+        max_pool(&self.pattern, x, &mut y, &mut arg, c, self.mode);
         if let Ok(mut saved) = self.arg.lock() {
             *saved = Some(Arc::new(arg));
         }
@@ -284,7 +324,7 @@ impl MaxPoolOp {
                 let xs = &T::cpu_storage_as_slice(cpu)?[lo..hi];
                 let n = batch * self.pattern.rows * c;
                 let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
-                max_pool(&self.pattern, xs, &mut y, &mut arg, c);
+                max_pool(&self.pattern, xs, &mut y, &mut arg, c, self.mode);
                 Arc::new(arg)
             }
         };
@@ -298,7 +338,7 @@ impl MaxPoolOp {
             candle_core::bail!("max-pool: gradient of shape {:?}", layout.dims());
         }
         let mut dx = vec![T::ZERO; batch * v * c];
-        max_unpool(&arg, gs, &mut dx, (self.pattern.rows, v), c);
+        max_unpool(&self.pattern_t, &arg, gs, &mut dx, c);
         Tensor::from_vec(dx, (batch, v, c), x.device())
     }
 }
@@ -448,5 +488,83 @@ mod tests {
         );
         let wrong = tensor(vec![0.0; 9 * 3], &[9, 3]);
         assert!(matches!(pool.forward(&wrong), Err(ConvError::Input { .. })));
+    }
+
+    /// Graph pooling's membership on a 6×6 grid: clusters are 2×2 blocks, each with its
+    /// top-left vertex as survivor, so neighbourhoods (one-ring ∪ block) overlap.
+    fn grid_membership() -> CsrMatrix {
+        let faces = grid_faces(6, 6);
+        let cluster_of: Vec<u32> = (0..36u32).map(|v| (v / 6 / 2) * 3 + (v % 6) / 2).collect();
+        let survivors: Vec<u32> = (0..9u32).map(|c| (c / 3) * 12 + (c % 3) * 2).collect();
+        mesh_hierarchy::graph::neighbourhoods(&faces, &survivors, &cluster_of).unwrap()
+    }
+
+    #[test]
+    fn graph_max_pool_takes_the_plain_max_over_overlapping_rows_with_gradients() {
+        let members = grid_membership();
+        assert!(members.nnz() > 36, "the neighbourhoods overlap");
+        let pool = MaxPool::with_mode(&members, MaxMode::Plain, &Device::Cpu).unwrap();
+        assert_eq!(pool.mode(), MaxMode::Plain);
+        let x = Var::from_tensor(&tensor(random_vec(2 * 36 * 3, 90), &[2, 36, 3])).unwrap();
+        let xv = to_vec(&x);
+        let kernel = pool.forward(x.as_tensor()).unwrap();
+        let fallback = pool.forward_with(x.as_tensor(), Backend::Fallback).unwrap();
+        assert_eq!(kernel.dims(), &[2, 9, 3]);
+        assert_eq!(to_vec(&kernel), to_vec(&fallback));
+        let y = to_vec(&kernel);
+        for b in 0..2 {
+            for r in 0..9 {
+                for ch in 0..3 {
+                    let want = members
+                        .row(r)
+                        .0
+                        .iter()
+                        .map(|&m| xv[(b * 36 + m as usize) * 3 + ch])
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    assert_eq!(y[(b * 9 + r) * 3 + ch], want);
+                }
+            }
+        }
+        for backend in [Backend::Kernel, Backend::Fallback] {
+            let pool = pool.with_backend(backend);
+            let loss = || {
+                let y = pool
+                    .forward(x.as_tensor())
+                    .map_err(candle_core::Error::wrap)?;
+                weighted_sum(&y, 91)
+            };
+            assert!(grad_check(&[&x], loss) < 1e-7, "{backend:?}");
+        }
+        // A vertex that is the max of several neighbourhoods gets the sum of their gradients
+        // (on both paths); a tie goes to the lowest vertex, also on the fallback.
+        let mut big = vec![0.0; 36];
+        // Vertex 13 is in the neighbourhoods of survivors 12 and 14 (coarse 3 and 4); 27 and
+        // 32 tie in coarse 7's, and 27 is also the max of coarse 8's.
+        big[13] = 5.0;
+        big[27] = 2.0;
+        big[32] = 2.0;
+        let with_13 = (0..9).filter(|&r| members.row(r).0.contains(&13)).count();
+        assert_eq!(with_13, 2);
+        let xb = Var::from_tensor(&tensor(big, &[36, 1])).unwrap();
+        for backend in [Backend::Kernel, Backend::Fallback] {
+            let y = pool.forward_with(xb.as_tensor(), backend).unwrap();
+            let g = y.sum_all().unwrap().backward().unwrap();
+            let dx = to_vec(g.get(xb.as_tensor()).unwrap());
+            assert_eq!(dx[13], 2.0, "{backend:?}");
+            assert_eq!(dx[27], 2.0, "{backend:?}");
+            assert_eq!(dx[32], 0.0, "{backend:?}: the tie goes to vertex 27");
+            assert_eq!(dx.iter().sum::<f64>(), 9.0, "{backend:?}");
+        }
+        // The signed-magnitude layer on the same rows differs (all-negative inputs).
+        let neg = tensor(
+            random_vec(36, 92).iter().map(|v| -v.abs()).collect(),
+            &[36, 1],
+        );
+        let signed = MaxPool::new(&members, &Device::Cpu).unwrap();
+        let (a, b) = (
+            to_vec(&pool.forward(&neg).unwrap()),
+            to_vec(&signed.forward(&neg).unwrap()),
+        );
+        assert!(a.iter().zip(&b).all(|(p, q)| p > q));
     }
 }

@@ -282,6 +282,14 @@ fn sparse_layers_and_pools_vertex_major_match_batch_major() {
             |x: &Tensor| max.forward_vertex_major(x),
         );
         check_layer("max pool", f, g, (3, 10, 4));
+        let graph = MaxPool::with_mode(&p, crate::MaxMode::Plain, &dev)
+            .unwrap()
+            .with_backend(backend);
+        let (f, g) = (
+            |x: &Tensor| graph.forward(x),
+            |x: &Tensor| graph.forward_vertex_major(x),
+        );
+        check_layer("graph max pool", f, g, (3, 10, 4));
         let mean = crate::neighbour_mean_matrix(&adjacency(16, &grid_faces(4, 4))).unwrap();
         let nb = SparseOp::new(&mean, &dev).unwrap().with_backend(backend);
         let w = |seed| tensor(random_vec(3 * 2, seed), &[3, 2]);

@@ -123,7 +123,10 @@ impl ConvBlock {
 /// Pooling from level i to level i + 1.
 #[derive(Debug, Clone)]
 pub(crate) enum Down {
+    /// Mean pooling (ours, qem, remesh).
     Mean(MeanPool),
+    /// Max pooling: signed magnitude over clusters (max) or the plain max over overlapping
+    /// neighbourhoods (graph), as the layer's mode says.
     Max(MaxPool),
     Sampling(Sampling),
     Identity,

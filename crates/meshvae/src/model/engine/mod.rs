@@ -9,7 +9,8 @@
 //! with tanh and the loss with its gradient, and hands its gradient slices to a fused Adam pass.
 //!
 //! It covers the unconditional model with Chebyshev convolutions (any K ≤ 8, own decoder
-//! weights) and every pooling, in f32 or f64 on the CPU; [`Engine::unsupported`] says why
+//! weights) and every pooling (graph pooling is a max pool over overlapping member lists,
+//! remeshing is mean pooling), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
 //! anything else is declined, and training then uses candle's path, which stays the reference
 //! (`tests.rs` compares the two).
 
