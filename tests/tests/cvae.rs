@@ -173,7 +173,7 @@ fn synthetic_bend_twist_samples_follow_their_label() {
     assert_shares(&shares);
 }
 
-/// Epochs (see the figures in docs/benchmarks.d/cvae.md).
+/// Epochs (see the figures in docs/benchmarks.md, "Conditional VAE").
 const SYNTH_EPOCHS: usize = 300;
 const HORSE_EPOCHS: usize = 100;
 

@@ -73,6 +73,7 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     for heading in [
         "## How these numbers were made",
         "## In the paper's layout",
+        "## Ordering of the columns",
         "## Relative improvements of ours",
         "## Network structures",
         "## Parameters",
@@ -91,6 +92,9 @@ fn quick_reproduce_writes_every_table_and_resumes() {
             let r = result(&work, dataset, column.id);
             assert!(r.is_finite() && r.test_rms > 0.0, "{dataset} {}", column.id);
             assert_eq!((r.epochs, r.seed), (2, 1));
+            // The default protocol: chosen on validation meshes, test-selected ones beside.
+            assert_eq!(r.selected_on, "validation");
+            assert!(r.val_meshes >= 1 && r.test_rms_selected_on_test.is_some());
         }
     }
     assert!(!md.contains("| not run |"), "a run is missing:\n{md}");

@@ -1,7 +1,7 @@
 //! Round trips of the real data sets through normalisation and f32 storage. Skipped (with a
 //! message) when the data sets are absent. To stay within a few seconds in a debug build, samba
 //! uses every 5th frame and elephant-gallop every 6th (the full figures come from
-//! `meshvae roundtrip … --json` in release, see docs/benchmarks.d/deform.md).
+//! `meshvae roundtrip … --json` in release, see docs/benchmarks.md, "deform-features").
 
 use deform_features::{FeatureExtractor, FeatureOptions, Normalization, Reconstructor};
 use mesh_io::MeshSet;

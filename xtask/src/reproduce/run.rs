@@ -23,6 +23,12 @@ pub struct RunResult {
     pub levels: Vec<usize>,
     pub test_meshes: usize,
     pub train_meshes: usize,
+    /// Meshes held out of training to choose the checkpoint.
+    #[serde(default)]
+    pub val_meshes: usize,
+    /// Which loss chose the evaluated weights: `validation`, `train` or `test`.
+    #[serde(default)]
+    pub selected_on: String,
     /// Test-set RMS (per coordinate, centroids aligned), in mesh units.
     pub test_rms: f64,
     /// `test_rms` / bounding-box diagonal.
@@ -37,6 +43,12 @@ pub struct RunResult {
     pub params_without_biases: usize,
     /// Epoch whose weights were evaluated.
     pub best_epoch: usize,
+    /// For comparison, test RMS of the weights the test loss would have chosen (the authors'
+    /// protocol on the same run), and their epoch; `None` where they are the evaluated ones.
+    #[serde(default)]
+    pub test_rms_selected_on_test: Option<f64>,
+    #[serde(default)]
+    pub best_epoch_on_test: Option<usize>,
     /// Training time summed over the epochs of `log.jsonl` (interrupted sessions included).
     pub train_seconds: f64,
     /// Set-up of this session (features, hierarchy) plus evaluation.
@@ -126,13 +138,29 @@ pub fn execute(
     .map_err(|e| ReproError::run(run, e))?;
 
     let device = Device::Cpu;
-    let trained = TrainedModel::load(&out, &device).map_err(|e| ReproError::run(run, e))?;
+    let load = |on_test: bool| {
+        TrainedModel::load_selected(&out, &device, on_test).map_err(|e| ReproError::run(run, e))
+    };
+    let trained = load(run.protocol.select_on_test)?;
     let report = trained
         .evaluate(set, &device)
         .map_err(|e| ReproError::run(run, e))?;
     let (_, best_epoch) = trained
         .epochs_trained()
         .map_err(|e| ReproError::run(run, e))?;
+    let (test_rms_selected_on_test, best_epoch_on_test) =
+        if run.protocol.select_on_test || trained.split.test.is_empty() {
+            (None, None)
+        } else {
+            let on_test = load(true)?;
+            let errors = on_test
+                .evaluate(set, &device)
+                .map_err(|e| ReproError::run(run, e))?;
+            let (_, epoch) = on_test
+                .epochs_trained()
+                .map_err(|e| ReproError::run(run, e))?;
+            (Some(errors.test.rms), Some(epoch))
+        };
     let log = meshvae::read_log(&folder.log()).map_err(|e| ReproError::run(run, e))?;
     let train_seconds: f64 = log.iter().map(|r| r.seconds).sum();
     let mut levels = trained.hierarchy.vertex_counts();
@@ -147,6 +175,8 @@ pub fn execute(
         levels,
         test_meshes: report.test.meshes,
         train_meshes: report.train.meshes,
+        val_meshes: trained.split.val.len(),
+        selected_on: trained.selected_on.to_string(),
         test_rms: report.test.rms,
         test_rms_rel: report.test.rms_rel,
         test_mean_distance: report.test.mean_distance,
@@ -155,6 +185,8 @@ pub fn execute(
         params: report.params.with_biases,
         params_without_biases: report.params.without_biases,
         best_epoch,
+        test_rms_selected_on_test,
+        best_epoch_on_test,
         train_seconds,
         other_seconds: (started.elapsed().as_secs_f64() - session_train).max(0.0),
     };

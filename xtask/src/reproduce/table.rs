@@ -28,6 +28,8 @@ pub struct Aggregate {
     pub mean_distance: Stat,
     pub train_rms: Stat,
     pub mean_shape: Stat,
+    /// Test RMS of the weights the test loss would have chosen (validation protocol only).
+    pub rms_on_test: Option<Stat>,
     pub params: usize,
     pub params_without_biases: usize,
     pub levels: Vec<usize>,
@@ -47,6 +49,12 @@ pub fn aggregate(results: &[RunResult], dataset: &str, column: &str) -> Option<A
         mean_distance: stat(|r| r.test_mean_distance)?,
         train_rms: stat(|r| r.train_rms)?,
         mean_shape: stat(|r| r.mean_shape_rms)?,
+        rms_on_test: Stat::of(
+            &runs
+                .iter()
+                .filter_map(|r| r.test_rms_selected_on_test)
+                .collect::<Vec<_>>(),
+        ),
         params: first.params,
         params_without_biases: first.params_without_biases,
         levels: first.levels.clone(),
@@ -74,6 +82,7 @@ pub fn markdown(outcome: &Outcome, kept: Option<&str>) -> String {
         ablation(&mut md, outcome, set);
     }
     paper_layout(&mut md, outcome);
+    ordering(&mut md, outcome);
     improvements(&mut md, outcome);
     structures(&mut md, outcome);
     frameworks(&mut md, outcome);
@@ -117,9 +126,10 @@ fn header(md: &mut String, o: &Outcome) {
     }
     let _ = writeln!(
         md,
-        "- Seeds {}: each seed draws one random split into halves (⌊N/2⌋ training meshes, the \
-         rest for testing), used by every network of that seed, and seeds the initial weights \
-         and the training.",
+        "- Seeds {}: each seed draws one random split into halves (⌊N/2⌋ training meshes, always \
+         including mesh 0, the rest pose every mesh's features are computed against; the rest \
+         for testing), used by every network of that seed, and seeds the initial weights and \
+         the training.",
         seeds.join(", ")
     );
     let _ = writeln!(
@@ -165,13 +175,13 @@ fn ablation(md: &mut String, o: &Outcome, set: &LoadedSet) {
     let _ = writeln!(md, "## Ablation on {name}\n");
     md.push_str(
         "| network | test RMS | rel | mean dist | train RMS | params (no biases) | ours against \
-         it |\n|---|---:|---:|---:|---:|---:|---:|\n",
+         it | test RMS, selected on test |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     let ours = aggregate(&o.results, name, OURS);
     let mut mean_shape = None;
     for column in columns_of(Group::Ablation) {
         let Some(a) = aggregate(&o.results, name, column.id) else {
-            let _ = writeln!(md, "| {} | not run | | | | | |", column.label);
+            let _ = writeln!(md, "| {} | not run | | | | | | |", column.label);
             continue;
         };
         let against = match &ours {
@@ -182,14 +192,15 @@ fn ablation(md: &mut String, o: &Outcome, set: &LoadedSet) {
         };
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
             column.label,
             a.rms.show(),
             a.rel.show(),
             a.mean_distance.show(),
             a.train_rms.show(),
             thousands(a.params_without_biases),
-            against
+            against,
+            a.rms_on_test.map_or("—".into(), |s| s.show()),
         );
         mean_shape.get_or_insert(a.mean_shape);
     }
@@ -199,7 +210,7 @@ fn ablation(md: &mut String, o: &Outcome, set: &LoadedSet) {
         });
         let _ = writeln!(
             md,
-            "| mean training shape (trivial predictor) | {} | | | | | {against} |",
+            "| mean training shape (trivial predictor) | {} | | | | | {against} | |",
             m.show()
         );
     }
@@ -268,13 +279,14 @@ fn paper_layout(md: &mut String, o: &Outcome) {
         let name = set.dataset.name;
         let _ = write!(md, "| {name} (ours) |");
         for c in AblationColumn::ALL {
-            let value = COLUMNS.iter().find(|col| col.paper == Some(c)).map_or(
-                "not run (issue 10)".into(),
-                |col| {
-                    aggregate(&o.results, name, col.id)
-                        .map_or("not run".into(), |a| sig(a.mean_distance.mean))
-                },
-            );
+            let value =
+                COLUMNS
+                    .iter()
+                    .find(|col| col.paper == Some(c))
+                    .map_or("not run".into(), |col| {
+                        aggregate(&o.results, name, col.id)
+                            .map_or("not run".into(), |a| sig(a.mean_distance.mean))
+                    });
             let _ = write!(md, " {value} |");
         }
         let max = aggregate(&o.results, name, "max")
@@ -292,6 +304,76 @@ fn paper_layout(md: &mut String, o: &Outcome) {
         "\nsamba is a sequence of the same subject and template as the paper's Swing; the \
          paper has no Horse row in this table (Horse is in the framework comparison below).\n\n",
     );
+}
+
+/// The paper's ablation columns ordered by error: the paper's order from its own table (mean
+/// over its rows of each column's error relative to ours, so that rows of different scales
+/// weigh alike) against ours on each data set, and the pairs on which they disagree.
+fn ordering(md: &mut String, o: &Outcome) {
+    let paper_score = |c: AblationColumn| {
+        let sum: f64 = paper::ABLATION
+            .iter()
+            .map(|row| row.get(c) / row.get(AblationColumn::Ours))
+            .sum();
+        sum / paper::ABLATION.len() as f64
+    };
+    let mut paper_order: Vec<AblationColumn> = AblationColumn::ALL.to_vec();
+    paper_order.sort_by(|a, b| paper_score(*a).total_cmp(&paper_score(*b)));
+    let names = |order: &[AblationColumn]| -> String {
+        order
+            .iter()
+            .map(|c| c.heading())
+            .collect::<Vec<_>>()
+            .join(" < ")
+    };
+    md.push_str(
+        "## Ordering of the columns
+
+The paper's seven ablation columns from lowest to \
+         highest error. The paper's order averages, over its four rows, each column's error \
+         divided by ours on that row.
+
+",
+    );
+    let _ = writeln!(md, "- Paper: {}.", names(&paper_order));
+    for set in &o.sets {
+        let name = set.dataset.name;
+        let mut ours: Vec<(AblationColumn, f64)> = AblationColumn::ALL
+            .iter()
+            .filter_map(|&c| {
+                let col = COLUMNS.iter().find(|col| col.paper == Some(c))?;
+                Some((c, aggregate(&o.results, name, col.id)?.rms.mean))
+            })
+            .collect();
+        if ours.len() < 2 {
+            continue;
+        }
+        ours.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let order: Vec<AblationColumn> = ours.iter().map(|(c, _)| *c).collect();
+        let rank = |list: &[AblationColumn], c: AblationColumn| list.iter().position(|&x| x == c);
+        let (mut agree, mut disagree) = (0, Vec::new());
+        for (i, &a) in order.iter().enumerate() {
+            for &b in &order[i + 1..] {
+                // Ours puts a below b; does the paper?
+                match (rank(&paper_order, a), rank(&paper_order, b)) {
+                    (Some(x), Some(y)) if x < y => agree += 1,
+                    _ => disagree.push(format!("{} below {}", a.heading(), b.heading())),
+                }
+            }
+        }
+        let _ = writeln!(
+            md,
+            "- {name}: {} — agrees with the paper on {agree} of {} pairs{}.",
+            names(&order),
+            agree + disagree.len(),
+            if disagree.is_empty() {
+                String::new()
+            } else {
+                format!("; here, unlike the paper: {}", disagree.join("; "))
+            }
+        );
+    }
+    md.push('\n');
 }
 
 fn improvements(md: &mut String, o: &Outcome) {
@@ -511,6 +593,10 @@ mod tests {
             params: 1000,
             params_without_biases: 900,
             best_epoch: 5,
+            val_meshes: 1,
+            selected_on: "validation".into(),
+            test_rms_selected_on_test: Some(rms * 0.99),
+            best_epoch_on_test: Some(4),
             train_seconds: 1.0,
             other_seconds: 1.0,
         }
@@ -567,6 +653,13 @@ mod tests {
         );
         assert!(md.contains("| Only Spectral Conv. (no pooling) | -8.36 % | -6.92 % | -10.00 % |"));
         assert!(md.contains("ours has the lowest test RMS"));
+        // Every column ties except ours: ours first, and the paper also puts ours first.
+        let line = md
+            .lines()
+            .find(|l| l.starts_with("- synthetic: Our Method <"))
+            .unwrap_or_else(|| panic!("{md}"));
+        assert!(line.contains("of 21 pairs"), "{line}");
+        assert!(md.contains("- Paper: Our Method < "), "{md}");
         assert!(md.contains("## Hand-written notes\n\nKEPT"));
         assert!(md.contains("Machine: 2 cores (`nproc`), test CPU"));
 

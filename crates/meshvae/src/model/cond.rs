@@ -19,8 +19,8 @@
 //! offsets c·W grow by ~lr per step while z·W_μᵀ, a sum over the latent size, changes many
 //! times faster; the class information then goes through z (the encoder separates the labels
 //! in latent space) and z ~ N(0, I) decodes shapes of either label whatever c says. Measured
-//! on the synthetic bend/twist set (docs/benchmarks.d/cvae.md): with 1, 60 % / 85 % of the
-//! samples nearest to a mesh of their label; with 8, 100 % / 80 %, the same training.
+//! on the synthetic bend/twist set (docs/benchmarks.md, "Conditional VAE"): with 1, 60 % / 85 %
+//! of the samples nearest to a mesh of their label; with 8, 100 % / 80 %, the same training.
 //!
 //! Variables: `enc.mu.label_weight`, `enc.sigma.label_weight` `[L, latent]`,
 //! `dec.fc.label_weight` `[L, V_L·C]` (weights, not biases, in the parameter count).
