@@ -68,6 +68,10 @@ struct ReproduceArgs {
     /// No progress bars.
     #[arg(long)]
     quiet: bool,
+    /// Train nothing: write the results page from the runs already finished (a full
+    /// reproduction spans several sessions).
+    #[arg(long)]
+    report_only: bool,
 }
 
 fn main() -> ExitCode {
@@ -158,6 +162,7 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
             .collect::<Vec<_>>()
             .join(" "),
         progress: !args.quiet,
+        report_only: args.report_only,
     };
     let outcome = reproduce::reproduce(options, notes)?;
     println!(

@@ -8,11 +8,16 @@ use xtask::reproduce::plan::{COLUMNS, PROTOCOLS};
 use xtask::reproduce::run::RunResult;
 
 fn reproduce(work: &Path, results: &Path) -> Output {
+    reproduce_with(work, results, &[])
+}
+
+fn reproduce_with(work: &Path, results: &Path, extra: &[&str]) -> Output {
     let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
         .args(["reproduce", "--quick", "--quiet", "--work"])
         .arg(work)
         .arg("--results")
         .arg(results)
+        .args(extra)
         .output()
         .expect("the xtask binary runs");
     assert!(
@@ -60,6 +65,17 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     let dir = std::env::temp_dir().join(format!("xtask-reproduce-quick-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let (work, results) = (dir.join("work"), dir.join("results.md"));
+    // Before any run: --report-only trains nothing and writes a page that says so.
+    reproduce_with(&work, &results, &["--report-only"]);
+    let md = std::fs::read_to_string(&results).unwrap();
+    assert!(
+        md.contains("**Partial:**") && md.contains("| not run |"),
+        "{md}"
+    );
+    assert!(
+        !work.join("synthetic").exists(),
+        "--report-only trained something"
+    );
     let first = reproduce(&work, &results);
     let stdout = String::from_utf8_lossy(&first.stdout).to_string();
 

@@ -78,6 +78,9 @@ pub struct Options {
     pub command: String,
     /// Draw progress bars (on a terminal).
     pub progress: bool,
+    /// Train nothing: write the markdown from the runs already finished (a full reproduction
+    /// spans several sessions; this shows where it stands).
+    pub report_only: bool,
 }
 
 impl Options {
@@ -243,6 +246,7 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     let mut sets = Vec::new();
     let mut results = Vec::new();
     let mut reused = 0;
+    let mut unfinished = 0;
     for &dataset in &options.datasets {
         let loaded = load(dataset, options.quick)?;
         for run in runs.iter().filter(|r| r.dataset.name == dataset.name) {
@@ -250,6 +254,11 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
             if let Some(done) = run::finished(run, &options.work)? {
                 reused += 1;
                 results.push(done);
+                runs_bar.inc(1);
+                continue;
+            }
+            if options.report_only {
+                unfinished += 1;
                 runs_bar.inc(1);
                 continue;
             }
@@ -279,6 +288,14 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     }
     epoch_bar.finish_and_clear();
     runs_bar.finish_and_clear();
+    if unfinished > 0 {
+        notes.push(format!(
+            "**Partial:** {unfinished} of the {} runs have not finished yet (\"not run\" below, \
+             and means over fewer seeds where a seed is missing); this page was written with \
+             `--report-only`, and the same command without it continues the runs.",
+            runs.len()
+        ));
+    }
     if reused > 0 {
         notes.push(format!(
             "{reused} of {} runs were finished by an earlier invocation and read from their \

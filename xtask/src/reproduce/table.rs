@@ -618,6 +618,7 @@ mod tests {
                 results: "r.md".into(),
                 command: "cargo xtask reproduce --quick".into(),
                 progress: false,
+                report_only: false,
             },
             sets: vec![LoadedSet {
                 dataset,
