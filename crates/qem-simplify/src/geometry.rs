@@ -70,7 +70,9 @@ pub(crate) fn point_triangle_distance_squared(p: Vec3, a: Vec3, b: Vec3, c: Vec3
     dot(d, d)
 }
 
-fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+/// The closest point of triangle (a, b, c) to `p`, by the Voronoi regions of the corners and
+/// sides; a degenerate triangle (segment, point) gives the nearest point of its three sides.
+pub(crate) fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
     let ab = sub(b, a);
     let ac = sub(c, a);
     let ap = sub(p, a);

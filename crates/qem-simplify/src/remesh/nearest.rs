@@ -1,7 +1,8 @@
 //! Closest-point queries over triangles, with segments and points as degenerate triangles: where
 //! on the template a remeshed vertex belongs, and which fine vertex seeds a cluster.
 
-use crate::geometry::{Vec3, add, dot, scale, sub};
+pub(crate) use crate::geometry::closest_point_on_triangle as closest_on_triangle;
+use crate::geometry::{Vec3, dot, sub};
 
 /// The closest point of one item to a query.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -223,75 +224,10 @@ fn item_box(t: &[Vec3; 3]) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
-/// The closest point of triangle (a, b, c) to `p`, by the Voronoi regions of the corners and
-/// sides. Degenerate triangles (segments, points) fall into a corner or side region, or,
-/// failing that, onto the nearest of the three sides.
-pub(crate) fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
-    let ab = sub(b, a);
-    let ac = sub(c, a);
-    let ap = sub(p, a);
-    let d1 = dot(ab, ap);
-    let d2 = dot(ac, ap);
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return a;
-    }
-    let bp = sub(p, b);
-    let d3 = dot(ab, bp);
-    let d4 = dot(ac, bp);
-    if d3 >= 0.0 && d4 <= d3 {
-        return b;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return add(a, scale(ab, d1 / (d1 - d3)));
-    }
-    let cp = sub(p, c);
-    let d5 = dot(ab, cp);
-    let d6 = dot(ac, cp);
-    if d6 >= 0.0 && d5 <= d6 {
-        return c;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return add(a, scale(ac, d2 / (d2 - d6)));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return add(b, scale(sub(c, b), t));
-    }
-    let denom = va + vb + vc;
-    if denom.abs() <= f64::MIN_POSITIVE {
-        let squared = |q: Vec3| dot(sub(p, q), sub(p, q));
-        return [
-            on_segment(p, a, b),
-            on_segment(p, b, c),
-            on_segment(p, c, a),
-        ]
-        .into_iter()
-        .fold(
-            a,
-            |best, q| if squared(q) < squared(best) { q } else { best },
-        );
-    }
-    let v = vb / denom;
-    let w = vc / denom;
-    add(a, add(scale(ab, v), scale(ac, w)))
-}
-
-/// The closest point of segment (a, b) to `p`.
-fn on_segment(p: Vec3, a: Vec3, b: Vec3) -> Vec3 {
-    let ab = sub(b, a);
-    let len2 = dot(ab, ab);
-    if len2 <= 0.0 {
-        return a;
-    }
-    add(a, scale(ab, (dot(sub(p, a), ab) / len2).clamp(0.0, 1.0)))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::{add, scale};
 
     /// A deterministic pseudo-random number in [0, 1) (xorshift).
     fn uniform(state: &mut u64) -> f64 {
