@@ -131,11 +131,15 @@ pub fn execute(
         ..TrainOptions::default()
     };
     let mut session_train = 0.0;
-    meshvae::train(&request, &options, |record| {
-        session_train += record.seconds;
-        on_epoch(record.epoch);
-    })
-    .map_err(|e| ReproError::run(run, e))?;
+    // A run whose training finished but whose result was lost (or deleted) is only evaluated
+    // again: its checkpoint was dropped when the result was first written.
+    if !(resume && training_finished(&folder, run.epochs)?) {
+        meshvae::train(&request, &options, |record| {
+            session_train += record.seconds;
+            on_epoch(record.epoch);
+        })
+        .map_err(|e| ReproError::run(run, e))?;
+    }
 
     let device = Device::Cpu;
     let load = |on_test: bool| {
@@ -205,5 +209,25 @@ pub fn execute(
             message: e.to_string(),
         }
     })?;
+    // The training state (weights plus Adam's two moments) is three times the weights and only
+    // serves to resume; a finished run keeps its weights, log and settings, so it can still be
+    // evaluated, reconstructed or sampled with `meshvae`.
+    let checkpoint = folder.checkpoint();
+    if checkpoint.is_file() {
+        std::fs::remove_file(&checkpoint).map_err(|e| ReproError::io(&checkpoint, e))?;
+    }
     Ok(result)
+}
+
+/// Whether the folder's log reaches the last epoch and its selected weights were written.
+fn training_finished(folder: &ModelFolder, epochs: usize) -> Result<bool, ReproError> {
+    let path = folder.log();
+    if !path.is_file() || !folder.weights().is_file() {
+        return Ok(false);
+    }
+    let log = meshvae::read_log(&path).map_err(|e| ReproError::Results {
+        path: path.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(log.last().is_some_and(|r| r.epoch == epochs))
 }
