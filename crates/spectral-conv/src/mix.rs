@@ -211,6 +211,8 @@ mod tests {
             (13, 7, 5),
             (3, 2, 1),
             (8, 1, 3),
+            (22, 9, 9),
+            (7, 9, 3),
         ] {
             let a = random_vec(q * batch, 1);
             let b = random_vec(2 * q * batch, 2);
@@ -219,6 +221,11 @@ mod tests {
             let mut out = vec![0.0; p * batch];
             let d = MixDims { p, batch };
             mix::<f64, Plain>(&[&a, &b], &m, d, Some(&bias), &mut out);
+            // f32 runs the AVX2 tiles where the CPU has them, ragged batches ending masked.
+            let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+            let mut out32 = vec![0.0f32; p * batch];
+            let (a32, b32) = (f32s(&a), f32s(&b));
+            mix::<f32, Plain>(&[&a32, &b32], &f32s(&m), d, Some(&f32s(&bias)), &mut out32);
             for o in 0..p {
                 for l in 0..batch {
                     let mut want = bias[o];
@@ -231,6 +238,8 @@ mod tests {
                         want += x * m[r * p + o];
                     }
                     assert!((out[o * batch + l] - want).abs() < 1e-12, "B={batch} p={p}");
+                    let got32 = f64::from(out32[o * batch + l]);
+                    assert!((got32 - want).abs() < 1e-4, "f32 B={batch} p={p}");
                 }
             }
             // dot_chunk over 3 vertices: t [3, q, B], g [3, p, B].
