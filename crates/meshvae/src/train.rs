@@ -275,17 +275,20 @@ pub fn train(
             }
             bar.inc(1);
         }
+        let n = train_ids.len().max(1) as f64;
+        // Evaluated in inference mode: it reads the weights and changes nothing. The engine, where
+        // there is one, computes the same error without candle's per-op allocations.
+        let mut loss_on = |ids: &[usize]| {
+            let engine = engine.as_mut();
+            epoch_loss(&model, &data, ids, batch, &spec.train.loss, device, engine)
+        };
+        let val_loss = loss_on(&data.split.val)?;
+        let test_loss = loss_on(&data.split.test)?;
         if keep_in_memory {
             kept_engine = engine;
         } else {
             drop(engine);
         }
-        let n = train_ids.len().max(1) as f64;
-        let loss_on =
-            |ids: &[usize]| validation_loss(&model, &data, ids, batch, &spec.train.loss, device);
-        let val_loss = loss_on(&data.split.val)?;
-        // Evaluated in inference mode: it reads the weights and changes nothing.
-        let test_loss = loss_on(&data.split.test)?;
         let record = EpochRecord {
             epoch,
             train_loss: sums[0] / n,
@@ -374,14 +377,33 @@ pub fn validation_loss(
     weights: &LossWeights,
     device: &Device,
 ) -> Result<Option<f64>> {
+    epoch_loss(model, data, ids, batch, weights, device, None)
+}
+
+/// [`validation_loss`], through `engine` if given (it must be the model's).
+fn epoch_loss(
+    model: &MeshVae,
+    data: &MeshData,
+    ids: &[usize],
+    batch: usize,
+    weights: &LossWeights,
+    device: &Device,
+    mut engine: Option<&mut crate::model::Engine>,
+) -> Result<Option<f64>> {
     if ids.is_empty() {
         return Ok(None);
     }
     let mut sum = 0.0;
     for chunk in ids.chunks(batch.max(1)) {
         let x = data.batch(chunk, device)?;
-        let c = data.conditions(model, chunk)?;
-        sum += model.rec_error_cond(&x, c.as_ref(), weights)? * chunk.len() as f64;
+        let error = match engine.as_deref_mut() {
+            Some(engine) => engine.rec_error(model, &x, weights)?,
+            None => {
+                let c = data.conditions(model, chunk)?;
+                model.rec_error_cond(&x, c.as_ref(), weights)?
+            }
+        };
+        sum += error * chunk.len() as f64;
     }
     Ok(Some(sum / ids.len() as f64))
 }

@@ -125,6 +125,16 @@ impl Engine {
         }
     }
 
+    /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]` in inference mode (z = μ, the
+    /// batch norms' running statistics): [`MeshVae::rec_error`] without candle's per-op
+    /// allocations. Does not disturb the last [`Self::forward_backward`]'s gradients.
+    pub fn rec_error(&mut self, model: &MeshVae, x: &Tensor, weights: &LossWeights) -> Result<f64> {
+        match &mut self.net {
+            Typed::F32(n) => n.rec_error(model, x, weights),
+            Typed::F64(n) => n.rec_error(model, x, weights),
+        }
+    }
+
     /// Adam's update from the gradients of the last [`Self::forward_backward`] plus the L2
     /// term's gradient `l2 · θ` (as `Adam::step_with_l2`); returns the L2 term's value
     /// l2 · Σ ½‖θ‖² of the weights before the update. `adam` must be built on

@@ -13,6 +13,7 @@ use candle_core::{Layout, Storage, Tensor, Var};
 use spectral_conv::{ChebKernel, ConvDims, MaxPool, SparseKernel};
 
 mod build;
+mod infer;
 
 /// A batch norm's variables (indices into the trainable list) and its last batch statistics.
 #[derive(Debug)]
@@ -24,6 +25,16 @@ struct Bn {
     mean: Vec<f64>,
     var: Vec<f64>,
     inv_std: Vec<f64>,
+}
+
+impl Bn {
+    /// The running mean and variance, as inference normalises with them.
+    fn running_stats(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        let read = |v: &Var| -> Result<Vec<f64>> {
+            Ok(v.as_tensor().to_dtype(candle_core::DType::F64)?.to_vec1()?)
+        };
+        Ok((read(&self.running_mean)?, read(&self.running_var)?))
+    }
 }
 
 /// conv → [batch norm] → [tanh]. Buffers are indices into [`Acts`]; `pre` (the convolution's
@@ -165,7 +176,34 @@ fn cpu_slice<'a, T: Scalar>(s: &'a Storage, l: &Layout, what: &str) -> Result<&'
     Ok(&data[lo..hi])
 }
 
+/// Runs `f` on the CPU data of the model's variables (read-locked meanwhile).
+fn with_weights<T: Scalar, R>(
+    vars: &[Var],
+    names: &[String],
+    f: impl FnOnce(&[&[T]]) -> Result<R>,
+) -> Result<R> {
+    let guards: Vec<_> = vars
+        .iter()
+        .map(|v| v.as_tensor().storage_and_layout())
+        .collect();
+    let w: Vec<&[T]> = guards
+        .iter()
+        .zip(names)
+        .map(|((s, l), name)| cpu_slice::<T>(s, l, name))
+        .collect::<Result<_>>()?;
+    f(&w)
+}
+
 impl<T: Scalar> Net<T> {
+    fn check_model(&self, model: &MeshVae) -> Result<()> {
+        if model.vertex_count() != self.v0 || model.trainable_vars().len() != self.vars.len() {
+            return Err(internal(
+                "the model is not the one the engine was built for",
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks the inputs' shapes and copies them into the engine's buffers; returns B.
     fn load_inputs(&mut self, x: &Tensor, eps: &Tensor) -> Result<usize> {
         let dims = x.dims();
@@ -214,26 +252,14 @@ impl<T: Scalar> Net<T> {
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<StepLoss> {
-        if model.vertex_count() != self.v0 || model.trainable_vars().len() != self.vars.len() {
-            return Err(internal(
-                "the model is not the one the engine was built for",
-            ));
-        }
+        self.check_model(model)?;
         let batch = self.load_inputs(x, eps)?;
-        let vars = self.vars.clone();
-        let guards: Vec<_> = vars
-            .iter()
-            .map(|v| v.as_tensor().storage_and_layout())
-            .collect();
-        let w: Vec<&[T]> = guards
-            .iter()
-            .zip(&self.names)
-            .map(|((s, l), name)| cpu_slice::<T>(s, l, name))
-            .collect::<Result<_>>()?;
-        let loss = self.forward(&w, batch, weights)?;
-        self.backward(&w, batch, weights)?;
-        drop(w);
-        drop(guards);
+        let (vars, names) = (self.vars.clone(), self.names.clone());
+        let loss = with_weights(&vars, &names, |w| {
+            let loss = self.forward(w, batch, weights)?;
+            self.backward(w, batch, weights)?;
+            Ok(loss)
+        })?;
         self.batch = batch;
         self.update_running_stats()?;
         Ok(loss)
@@ -241,11 +267,11 @@ impl<T: Scalar> Net<T> {
 
     fn forward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) -> Result<StepLoss> {
         for node in &mut self.enc {
-            forward_node(node, &mut self.acts, w, batch)?;
+            forward_node(node, &mut self.acts, w, batch, BnStats::Batch)?;
         }
         let kl = self.latent_forward(w, batch);
         for node in &mut self.dec {
-            forward_node(node, &mut self.acts, w, batch)?;
+            forward_node(node, &mut self.acts, w, batch, BnStats::Batch)?;
         }
         let n = self.v0 * FEATURE_CHANNELS * batch;
         let coeff = 2.0 * weights.rec / batch as f64;
@@ -456,11 +482,20 @@ impl<T: Scalar> Net<T> {
     }
 }
 
+/// Which statistics a batch norm normalises with: the batch's own (training; they are kept for
+/// the backward pass and the running averages) or the running ones (inference, as `Mode::Eval`).
+#[derive(Clone, Copy, PartialEq)]
+enum BnStats {
+    Batch,
+    Running,
+}
+
 fn forward_node<T: Scalar>(
     node: &mut Node,
     acts: &mut Acts<T>,
     w: &[&[T]],
     batch: usize,
+    stats: BnStats,
 ) -> Result<()> {
     match node {
         Node::Conv(c) => {
@@ -480,7 +515,23 @@ fn forward_node<T: Scalar>(
                 &mut pre[..ny],
             );
             acts.put(c.terms, terms);
-            if let Some(bn) = &mut c.bn {
+            if let (Some(bn), BnStats::Running) = (&c.bn, stats) {
+                let (mean, var) = bn.running_stats()?;
+                let inv_std: Vec<f64> = var
+                    .iter()
+                    .map(|v| 1.0 / (v + BatchNorm::EPS).sqrt())
+                    .collect();
+                let out = &mut acts.0[c.out][..ny];
+                let params = (w[bn.gamma], w[bn.beta]);
+                k::bn_forward(
+                    &pre[..ny],
+                    out,
+                    (&mean, &inv_std),
+                    params,
+                    (c.co, batch),
+                    c.tanh,
+                );
+            } else if let Some(bn) = &mut c.bn {
                 let (mean, var) = k::moments(&pre[..ny], (c.co, batch));
                 bn.inv_std = var
                     .iter()

@@ -150,6 +150,48 @@ fn f32_step_is_close_to_candle() {
     compare_step(&config, DType::F32, 4, 2e-3);
 }
 
+#[test]
+fn inference_error_equals_candle_and_leaves_the_step_alone() {
+    let weights = LossWeights::default();
+    for (pool, dtype, tol) in PoolKind::ALL
+        .iter()
+        .map(|&p| (p, DType::F64, 1e-10))
+        .chain([(PoolKind::Mean, DType::F32, 1e-5)])
+    {
+        let config = ModelConfig {
+            pool,
+            channels: 5,
+            latent: 6,
+            ..Default::default()
+        };
+        let (model, _) = models(&config, dtype);
+        let mut engine = Engine::new(&model, 5).unwrap().unwrap();
+        let mut adam = Adam::new(model.trainable_vars(), 1e-2).unwrap();
+        // A few steps, so that the running statistics are neither 0/1 nor a batch's own.
+        for seed in 0..3 {
+            let (x, eps) = inputs(&model, 5, seed);
+            engine.forward_backward(&model, &x, &eps, &weights).unwrap();
+            engine.apply_adam(&mut adam, weights.l2).unwrap();
+        }
+        let (x, eps) = inputs(&model, 4, 9);
+        engine.forward_backward(&model, &x, &eps, &weights).unwrap();
+        let before = engine.gradients().unwrap();
+        // Another batch size than the step's, and one mesh alone (batch statistics would be 0).
+        for batch in [3, 1] {
+            let (x, _) = inputs(&model, batch, 11);
+            let want = model.rec_error(&x, &weights).unwrap();
+            let got = engine.rec_error(&model, &x, &weights).unwrap();
+            assert!(
+                (got - want).abs() <= tol * want.abs(),
+                "{pool:?} {dtype:?} B={batch}: {got} vs {want}"
+            );
+        }
+        for ((name, a), (_, b)) in before.iter().zip(&engine.gradients().unwrap()) {
+            assert_eq!(values(a), values(b), "{pool:?}: gradient of {name} changed");
+        }
+    }
+}
+
 /// Runs `steps` Adam steps on one path; returns the weights.
 fn train(config: &ModelConfig, engine: bool, steps: usize) -> Vec<Vec<f64>> {
     let (model, _) = models(config, DType::F64);
