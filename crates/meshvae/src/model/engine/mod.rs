@@ -7,6 +7,8 @@
 //! every activation, gradient and scratch buffer (sized for the largest batch), keeps them
 //! `[V, C, B]` (the graph kernels' own layout: no transposes between layers), fuses batch norm
 //! with tanh and the loss with its gradient, and hands its gradient slices to a fused Adam pass.
+//! Training also evaluates the validation and test losses on the same buffers
+//! ([`Engine::rec_error`]: z = μ, the batch norms' running statistics).
 //!
 //! It covers the unconditional model with Chebyshev convolutions (any K ≤ 8, own decoder
 //! weights) and every pooling (graph pooling is a max pool over overlapping member lists,
