@@ -41,12 +41,14 @@ pub mod ply;
 mod quality;
 pub mod set;
 pub mod synth;
+mod twins;
 
 pub use error::{MeshIoError, Result, Warning};
 pub use format::{MeshFormat, read_mesh, write_mesh};
 pub use mesh::{Face, MeshSet, Point, TriMesh, bbox, bbox_diagonal, check_same_connectivity};
 pub use quality::QualityReport;
 pub use set::{load_files, load_folder, load_set, write_folder};
+pub use twins::ShapeGroups;
 
 /// A value read from files, with the warnings met on the way (quads split, …).
 #[derive(Debug, Clone, PartialEq)]
