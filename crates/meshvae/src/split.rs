@@ -14,6 +14,7 @@
 
 use crate::error::{Result, VaeError};
 use crate::rng::Rng;
+use mesh_io::ShapeGroups;
 use serde::{Deserialize, Serialize};
 
 /// Indices (into the mesh set) of the training, validation and test meshes, each ascending and
@@ -90,6 +91,63 @@ impl Split {
             val: Vec::new(),
             test,
         })
+    }
+
+    /// [`Self::random`] over shapes instead of meshes: meshes of one [`ShapeGroups`] group (a
+    /// pose stored twice) land on the same side, so no test mesh has a twin in training. The
+    /// counts are ⌊G·(1 − test_fraction)⌋ training groups of the G; mesh 0's group trains.
+    /// Without repeated shapes this is exactly [`Self::random`].
+    pub fn random_by_shape(groups: &ShapeGroups, test_fraction: f64, seed: u64) -> Result<Self> {
+        let by_group = Self::random(groups.len(), test_fraction, seed)?;
+        Ok(by_group.expand(groups))
+    }
+
+    /// [`Self::with_validation`] over shapes: whole groups move to the validation set (their
+    /// members that train), drawn among the groups with a training mesh. Without repeated shapes
+    /// this is exactly [`Self::with_validation`].
+    pub fn with_validation_by_shape(
+        self,
+        groups: &ShapeGroups,
+        fraction: f64,
+        seed: u64,
+    ) -> Result<Self> {
+        let mut train_groups: Vec<usize> = self.train.iter().map(|&i| groups.group(i)).collect();
+        train_groups.sort_unstable();
+        train_groups.dedup();
+        let by_group = Self {
+            train: train_groups,
+            val: Vec::new(),
+            test: Vec::new(),
+        };
+        // Checks `fraction` as the mesh-level method does.
+        let val_groups = by_group.with_validation(fraction, seed)?.val;
+        if !self.val.is_empty() {
+            return Ok(self);
+        }
+        let (val, train): (Vec<usize>, Vec<usize>) = self
+            .train
+            .into_iter()
+            .partition(|&i| val_groups.binary_search(&groups.group(i)).is_ok());
+        Ok(Self {
+            train,
+            val,
+            test: self.test,
+        })
+    }
+
+    /// A split of group indices as the split of their members (sorted lists).
+    fn expand(self, groups: &ShapeGroups) -> Self {
+        let members = groups.members();
+        let meshes = |ids: Vec<usize>| {
+            let mut out: Vec<usize> = ids.iter().flat_map(|&g| members[g].clone()).collect();
+            out.sort_unstable();
+            out
+        };
+        Self {
+            train: meshes(self.train),
+            val: meshes(self.val),
+            test: meshes(self.test),
+        }
     }
 
     /// Moves round(`fraction` · training count) training meshes (at least one when `fraction`
@@ -272,6 +330,57 @@ mod tests {
         // Given lists stay as given.
         let lists = Split::from_three_lists(6, vec![0, 1], vec![2], vec![3]).unwrap();
         assert_eq!(lists.clone().with_validation(0.5, 1).unwrap(), lists);
+    }
+
+    /// Groups as horse-gallop's: mesh i and mesh i + 24 are one shape.
+    fn twins(n: usize) -> ShapeGroups {
+        let frames: Vec<mesh_io::TriMesh> = (0..n)
+            .map(|i| {
+                let k = (i % (n / 2)) as f32;
+                let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, k], [0.0, 1.0, 0.0]];
+                mesh_io::TriMesh::new(p, vec![[0, 1, 2]]).unwrap()
+            })
+            .collect();
+        let names = (0..n).map(|i| i.to_string()).collect();
+        let set = mesh_io::MeshSet::from_meshes(frames, names).unwrap();
+        set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)
+    }
+
+    #[test]
+    fn splits_by_shape_keep_twins_together() {
+        let groups = twins(48);
+        assert_eq!(groups.len(), 24);
+        for seed in 0..10 {
+            let s = Split::random_by_shape(&groups, 0.5, seed)
+                .unwrap()
+                .with_validation_by_shape(&groups, 0.1, seed)
+                .unwrap();
+            s.check(48).unwrap();
+            assert_eq!((s.train.len(), s.val.len(), s.test.len()), (22, 2, 24));
+            assert!(s.train.contains(&0) && s.train.contains(&24));
+            // Each list holds whole pairs: no test or validation mesh has a twin elsewhere.
+            for list in [&s.train, &s.val, &s.test] {
+                for &i in list.iter() {
+                    assert!(
+                        list.contains(&((i + 24) % 48)),
+                        "seed {seed}: {i} without twin"
+                    );
+                }
+            }
+        }
+        // Without repeated shapes: exactly the mesh-level split.
+        let single = ShapeGroups::singletons(48);
+        for seed in 0..5 {
+            let by_shape = Split::random_by_shape(&single, 0.5, seed).unwrap();
+            assert_eq!(by_shape, Split::random(48, 0.5, seed).unwrap());
+            assert_eq!(
+                by_shape
+                    .clone()
+                    .with_validation_by_shape(&single, 0.1, seed)
+                    .unwrap(),
+                by_shape.with_validation(0.1, seed).unwrap()
+            );
+        }
     }
 
     #[test]
