@@ -3,8 +3,9 @@
 //! **In:** mesh files (OBJ, OFF, PLY, glTF/GLB) — a folder of them, a list, or one GLB whose
 //! morph targets are the frames — all sharing one connectivity, plus an optional labels CSV.
 //! **Out:** a validated [`MeshSet`] (one face list, N frames of positions, names, labels), a
-//! [`QualityReport`], OBJ/GLB files, and a one-file binary cache (`.mvset`) that loads an order of
-//! magnitude faster than the OBJ files it came from.
+//! [`QualityReport`], OBJ/GLB files, a one-file binary cache (`.mvset`) that loads an order of
+//! magnitude faster than the OBJ files it came from, and [`ShapeGroups`]: which meshes of a set
+//! are one shape (an animation cycle stored twice), for splits that keep such twins together.
 //!
 //! Every problem is a typed [`MeshIoError`] naming the file and what is wrong; nothing panics on
 //! bad input, and every writer writes a temporary file and renames it.

@@ -6,6 +6,7 @@
 //! training half, so "unseen" errors are largely errors on seen shapes; splitting by group avoids
 //! that.
 
+use crate::error::{MeshIoError, Result};
 use crate::mesh::{MeshSet, Point};
 
 /// Which meshes of a set share one shape (up to translation): `group(i)` numbers the groups in
@@ -65,7 +66,15 @@ impl MeshSet {
     /// per-vertex differences at most `rel_tol` times the first mesh's bounding-box diagonal
     /// (see [`ShapeGroups::DEFAULT_TOLERANCE`]). Each mesh joins the group of the first earlier
     /// mesh it matches.
-    pub fn shape_groups(&self, rel_tol: f64) -> ShapeGroups {
+    ///
+    /// Errors: `rel_tol` negative or not finite (a NaN bound would merge every mesh).
+    pub fn shape_groups(&self, rel_tol: f64) -> Result<ShapeGroups> {
+        if !(rel_tol.is_finite() && rel_tol >= 0.0) {
+            return Err(MeshIoError::InvalidArgument {
+                argument: "shape tolerance",
+                message: format!("{rel_tol} is not a finite number ≥ 0"),
+            });
+        }
         let centred: Vec<Vec<[f64; 3]>> = self.frames().map(centre).collect();
         let v = self.vertex_count().max(1) as f64;
         let tol = rel_tol * self.template().bbox_diagonal();
@@ -85,10 +94,10 @@ impl MeshSet {
             }
             count += 1;
         }
-        ShapeGroups {
+        Ok(ShapeGroups {
             of: of.into_iter().map(|g| g.unwrap_or(0)).collect(),
             count,
-        }
+        })
     }
 }
 
@@ -160,21 +169,26 @@ mod tests {
             rounding,
             moved([0.0, 0.0, 1.0]),
         ]);
-        let g = s.shape_groups(ShapeGroups::DEFAULT_TOLERANCE);
+        let g = s.shape_groups(ShapeGroups::DEFAULT_TOLERANCE).unwrap();
         assert_eq!(g.members(), vec![vec![0, 2, 3, 4], vec![1]]);
         assert!(g.has_repeats() && g.len() == 2 && g.group(3) == 0);
         // A looser tolerance merges the bent mesh too; a tighter one separates nothing new.
-        assert_eq!(s.shape_groups(1e-1).len(), 1);
-        assert_eq!(s.shape_groups(1e-9).len(), 3);
+        assert_eq!(s.shape_groups(1e-1).unwrap().len(), 1);
+        assert_eq!(s.shape_groups(1e-9).unwrap().len(), 3);
         let distinct = set(&[base, bent]);
         assert!(
             !distinct
                 .shape_groups(ShapeGroups::DEFAULT_TOLERANCE)
+                .unwrap()
                 .has_repeats()
         );
         assert_eq!(
             ShapeGroups::singletons(3).members(),
             vec![vec![0], vec![1], vec![2]]
         );
+        for bad in [f64::NAN, -1e-4, f64::INFINITY] {
+            let err = s.shape_groups(bad).unwrap_err().to_string();
+            assert!(err.contains("shape tolerance"), "{err}");
+        }
     }
 }

@@ -7,7 +7,7 @@ use mesh_io::{ShapeGroups, datasets, load_set};
 fn groups(name: &str) -> Option<(usize, Vec<Vec<usize>>)> {
     let dir = datasets::find_or_skip(name)?;
     let set = load_set(&dir).unwrap().value;
-    let g = set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE);
+    let g = set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE).unwrap();
     Some((set.len(), g.members()))
 }
 

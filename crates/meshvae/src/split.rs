@@ -343,7 +343,7 @@ mod tests {
             .collect();
         let names = (0..n).map(|i| i.to_string()).collect();
         let set = mesh_io::MeshSet::from_meshes(frames, names).unwrap();
-        set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)
+        set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE).unwrap()
     }
 
     #[test]
