@@ -121,6 +121,31 @@ fn quick_reproduce_writes_every_table_and_resumes() {
             // The default protocol: chosen on validation meshes, test-selected ones beside.
             assert_eq!(r.selected_on, "validation");
             assert!(r.val_meshes >= 1 && r.test_rms_selected_on_test.is_some());
+            assert!(r.split_by_shape);
+        }
+    }
+    if horse {
+        // horse-gallop holds each pose twice: the default split keeps both copies on one side.
+        let path = work
+            .join("horse-gallop")
+            .join(PROTOCOLS[0].id)
+            .join("e2/seed1/ours/split.json");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let split: meshvae::SplitFile = serde_json::from_str(&text).unwrap();
+        assert!(split.by_shape);
+        assert_eq!(split.repeated_shapes.len(), 24);
+        let side = |i: &usize| {
+            if split.test.contains(i) {
+                "test"
+            } else {
+                "train or validation"
+            }
+        };
+        for group in &split.repeated_shapes {
+            assert!(
+                group.iter().all(|i| side(i) == side(&group[0])),
+                "copies of one shape on both sides: {group:?}"
+            );
         }
     }
     assert!(!md.contains("| not run |"), "a run is missing:\n{md}");

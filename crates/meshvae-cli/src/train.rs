@@ -69,6 +69,11 @@ pub struct TrainArgs {
     /// [default: 0.1].
     #[arg(long)]
     val_fraction: Option<f64>,
+    /// Draw the random test and validation meshes one by one, even where the set holds the
+    /// same shape more than once (by default copies of a shape stay on one side, so no test
+    /// shape is also a training mesh).
+    #[arg(long)]
+    split_by_mesh: bool,
     /// Train a conditional VAE on these labels: a CSV of `file,label` lines, one per mesh
     /// (generate with `meshvae generate --label L`).
     #[arg(long, conflicts_with = "conditional")]
@@ -202,6 +207,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     train.batch = args.batch.unwrap_or(base_train.batch);
     train.lr = args.lr.unwrap_or(base_train.lr);
     train.val_fraction = args.val_fraction.unwrap_or(base_train.val_fraction);
+    train.split_by_shape = !args.split_by_mesh && base_train.split_by_shape;
     if let Some([rec, kl, l2]) = args.loss_weights {
         train.loss.rec = rec;
         train.loss.kl = kl;

@@ -57,6 +57,42 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         1,
         "cannot resume",
     );
+    // The split is drawn by shape unless asked otherwise, and a model keeps its kind of split.
+    let split = |dir: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("split.json")).unwrap()).unwrap()
+    };
+    assert_eq!(split(&model)["by_shape"], true);
+    fails_with(
+        &meshvae(&[
+            "train",
+            s(&set),
+            "--out",
+            s(&model),
+            "--resume",
+            "--split-by-mesh",
+            "--quiet",
+        ]),
+        1,
+        "cannot resume",
+    );
+    let by_mesh = dir.join("by-mesh");
+    ok(&meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&by_mesh),
+        "--epochs",
+        "1",
+        "--batch",
+        "4",
+        "--latent",
+        "16",
+        "--split-by-mesh",
+        "--quiet",
+    ]));
+    assert_eq!(split(&by_mesh)["by_shape"], false);
+    // The synthetic set has no repeated shape: both ways draw the same meshes.
+    assert_eq!(split(&by_mesh)["test"], split(&model)["test"]);
 
     let json = ok(&meshvae(&["eval", s(&model), "--json"]));
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();

@@ -22,7 +22,7 @@ use crate::split::{Selection, Split};
 use candle_core::Device;
 use deform_features::{FeatureOptions, Normalization};
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
-use mesh_io::{MeshSet, TriMesh};
+use mesh_io::{MeshSet, ShapeGroups, TriMesh};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -50,6 +50,12 @@ pub struct TrainConfig {
     /// validation sets existed read as 0.
     #[serde(default)]
     pub val_fraction: f64,
+    /// Draw the random test and validation sets by shape, not by mesh: meshes with the same
+    /// vertex positions (a cycle stored twice, as horse-gallop's 48 meshes are) always land on
+    /// the same side, so no test shape has a copy among the training meshes. A set without
+    /// repeats splits exactly as by mesh. Models saved before this option read as false.
+    #[serde(default)]
+    pub split_by_shape: bool,
 }
 
 impl Default for TrainConfig {
@@ -62,6 +68,7 @@ impl Default for TrainConfig {
             loss: LossWeights::default(),
             test_fraction: 0.5,
             val_fraction: 0.1,
+            split_by_shape: true,
         }
     }
 }
@@ -283,6 +290,13 @@ pub struct SplitFile {
     /// chose on the test meshes).
     #[serde(default = "legacy_selection")]
     pub selected_on: Selection,
+    /// Whether the random sets were drawn by shape (see [`TrainConfig::split_by_shape`]).
+    #[serde(default)]
+    pub by_shape: bool,
+    /// The groups of meshes with the same shape (only groups of two or more), as found when
+    /// the split was drawn; empty if the set has no repeats or they were not looked for.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repeated_shapes: Vec<Vec<usize>>,
 }
 
 fn legacy_selection() -> Selection {
@@ -300,7 +314,20 @@ impl SplitFile {
             val_names: pick(&split.val),
             test_names: pick(&split.test),
             selected_on: split.selection(),
+            by_shape: false,
+            repeated_shapes: Vec::new(),
         }
+    }
+
+    /// Records that the sets were drawn by shape, with the groups of repeated shapes.
+    pub fn with_shapes(mut self, groups: &ShapeGroups) -> Self {
+        self.by_shape = true;
+        self.repeated_shapes = groups
+            .members()
+            .into_iter()
+            .filter(|g| g.len() > 1)
+            .collect();
+        self
     }
 
     /// The split it records.

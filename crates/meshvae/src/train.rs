@@ -33,7 +33,7 @@ use candle_core::Device;
 use deform_features::FeatureOptions;
 use indicatif::{ProgressBar, ProgressStyle};
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
-use mesh_io::{MeshSet, TriMesh};
+use mesh_io::{MeshSet, ShapeGroups, TriMesh};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -168,19 +168,19 @@ pub fn train(
 
     // Checked before anything is written, so bad settings leave no half-made model folder.
     request.model.validate()?;
-    let (spec, hierarchy, data, template) = if options.resume {
+    let (spec, hierarchy, data, files) = if options.resume {
         let (spec, hierarchy, data) = resume_setup(request, &folder, hierarchy_config)?;
         (spec, hierarchy, data, None)
     } else {
-        let (spec, hierarchy, data, template) =
+        let (spec, hierarchy, data, files) =
             fresh_setup(request, &folder, options.force, hierarchy_config)?;
-        (spec, hierarchy, data, Some(template))
+        (spec, hierarchy, data, Some(files))
     };
 
     let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
     let mut adam = Adam::new(model.trainable_vars(), spec.train.lr)?;
-    if let Some(template) = &template {
-        write_model_files(&folder, &spec, &hierarchy, &data, template)?;
+    if let Some(files) = &files {
+        write_model_files(&folder, &spec, &hierarchy, &data, files)?;
     }
     let mut progress = Progress {
         epoch: 0,
@@ -413,16 +413,27 @@ fn fresh_setup(
     folder: &ModelFolder,
     force: bool,
     hierarchy_config: HierarchyConfig,
-) -> Result<(ModelSpec, Hierarchy, MeshData, TriMesh)> {
+) -> Result<(ModelSpec, Hierarchy, MeshData, NewFiles)> {
     let set = request.set;
+    let train = &request.train;
+    // Singletons split exactly as mesh by mesh, so one code path serves both settings.
+    let groups = if train.split_by_shape {
+        set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)?
+    } else {
+        ShapeGroups::singletons(set.len())
+    };
     let split = match &request.split {
         Some(s) => {
             s.check(set.len())?;
             s.clone()
         }
-        None => Split::random(set.len(), request.train.test_fraction, request.train.seed)?,
+        None => Split::random_by_shape(&groups, train.test_fraction, train.seed)?,
     }
-    .with_validation(request.train.val_fraction, request.train.seed)?;
+    .with_validation_by_shape(&groups, train.val_fraction, train.seed)?;
+    let mut split_file = SplitFile::new(&split, set.names());
+    if train.split_by_shape {
+        split_file = split_file.with_shapes(&groups);
+    }
     let labels = mesh_labels(&request.model, set, &split)?;
     prepare_out_dir(folder, force)?;
     let template = set.template();
@@ -444,7 +455,17 @@ fn fresh_setup(
         source: request.source.clone(),
         labels,
     };
-    Ok((spec, hierarchy, data, template))
+    let files = NewFiles {
+        template,
+        split: split_file,
+    };
+    Ok((spec, hierarchy, data, files))
+}
+
+/// What a new model folder gets beside its spec, hierarchy and normalisation.
+struct NewFiles {
+    template: TriMesh,
+    split: SplitFile,
 }
 
 /// The set's labels for a conditional model (`None` for an unconditional one), checked: every
@@ -496,12 +517,12 @@ fn write_model_files(
     spec: &ModelSpec,
     hierarchy: &Hierarchy,
     data: &MeshData,
-    template: &TriMesh,
+    files: &NewFiles,
 ) -> Result<()> {
     hierarchy.save(&folder.hierarchy())?;
     folder.write_json(&folder.normalization(), &data.normalization)?;
-    folder.write_json(&folder.split(), &SplitFile::new(&data.split, &spec.names))?;
-    mesh_io::write_mesh(&folder.template(), template)?;
+    folder.write_json(&folder.split(), &files.split)?;
+    mesh_io::write_mesh(&folder.template(), &files.template)?;
     folder.write_json(&folder.config(), spec)
 }
 
@@ -537,6 +558,7 @@ fn resume_setup(
         a.loss,
         a.test_fraction,
         a.val_fraction,
+        a.split_by_shape,
     ) != (
         b.batch,
         b.lr,
@@ -544,6 +566,7 @@ fn resume_setup(
         b.loss,
         b.test_fraction,
         b.val_fraction,
+        b.split_by_shape,
     ) {
         differences.push("training settings other than epochs");
     }

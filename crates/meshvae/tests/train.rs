@@ -7,8 +7,8 @@ use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
 use meshvae::{
-    ModelConfig, ModelFolder, Selection, TrainConfig, TrainOptions, TrainRequest, TrainedModel,
-    VaeError, read_log, train,
+    ModelConfig, ModelFolder, Selection, Split, SplitFile, TrainConfig, TrainOptions, TrainRequest,
+    TrainedModel, VaeError, read_log, train,
 };
 use std::path::{Path, PathBuf};
 
@@ -306,4 +306,60 @@ fn test_meshes_influence_neither_training_nor_the_chosen_checkpoint() {
     assert_eq!(on_test.epochs_trained().unwrap().1, best_test);
     let _ = std::fs::remove_dir_all(&out_a);
     let _ = std::fs::remove_dir_all(&out_b);
+}
+
+#[test]
+fn copies_of_one_shape_stay_on_one_side_of_the_split() {
+    // Every shape twice, as horse-gallop stores its gallop cycle.
+    let once = small_set(5, 8);
+    let n = once.len();
+    let mut positions = Vec::new();
+    let mut names = Vec::new();
+    for copy in 0..2 {
+        for (i, frame) in once.frames().enumerate() {
+            positions.extend_from_slice(frame);
+            names.push(format!("copy{copy}_{i:02}"));
+        }
+    }
+    let twice =
+        MeshSet::from_flat(once.faces().to_vec(), once.vertex_count(), positions, names).unwrap();
+    let out = scratch("twins");
+    let mut req = request(&twice, &out, 1);
+    req.train.val_fraction = 0.25;
+    train(&req, &options(false, false), |_| {}).unwrap();
+    let folder = ModelFolder::new(&out);
+    let file: SplitFile = folder.read_json(&folder.split()).unwrap();
+    assert!(file.by_shape);
+    let expected: Vec<Vec<usize>> = (0..n).map(|i| vec![i, i + n]).collect();
+    assert_eq!(file.repeated_shapes, expected);
+    let side = |i: usize| {
+        (
+            file.test.contains(&i),
+            file.val.contains(&i),
+            file.train.contains(&i),
+        )
+    };
+    for i in 0..n {
+        assert_eq!(side(i), side(i + n), "mesh {i} and its copy are split");
+    }
+    assert!(!file.test.is_empty() && !file.val.is_empty());
+    assert_eq!(file.test.len(), n, "half of the shapes test");
+
+    // Opting out draws mesh by mesh, exactly the plain random split.
+    req.train.split_by_shape = false;
+    train(&req, &options(false, true), |_| {}).unwrap();
+    let file: SplitFile = folder.read_json(&folder.split()).unwrap();
+    let plain = Split::random(2 * n, 0.5, req.train.seed)
+        .unwrap()
+        .with_validation(0.25, req.train.seed)
+        .unwrap();
+    assert!(!file.by_shape && file.repeated_shapes.is_empty());
+    assert_eq!(file.split(), plain);
+    // A model trained by shape is not resumed as one drawn by mesh.
+    let same = train(&req, &options(true, false), |_| {});
+    assert!(same.is_ok(), "same settings resume: {same:?}");
+    req.train.split_by_shape = true;
+    let err = train(&req, &options(true, false), |_| {}).unwrap_err();
+    assert!(err.to_string().contains("training settings"), "{err}");
+    let _ = std::fs::remove_dir_all(&out);
 }

@@ -70,6 +70,9 @@ pub struct Options {
     /// Small synthetic set, one checkpoint per run.
     pub quick: bool,
     pub protocol: &'static Protocol,
+    /// Draw each seed's split by shape (`meshvae::TrainConfig::split_by_shape`); false draws it
+    /// mesh by mesh, as the paper's random halves.
+    pub by_shape: bool,
     /// Folder of the model folders and run results.
     pub work: PathBuf,
     /// The markdown file to write.
@@ -223,7 +226,13 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     options.validate()?;
     let started = Instant::now();
     let seeds: Vec<u64> = (1..=options.seeds).collect();
-    let runs = plan::runs(&options.datasets, options.protocol, options.epochs, &seeds);
+    let runs = plan::runs(
+        &options.datasets,
+        options.protocol,
+        options.epochs,
+        &seeds,
+        options.by_shape,
+    );
     let multi = MultiProgress::with_draw_target(if options.progress {
         ProgressDrawTarget::stderr()
     } else {

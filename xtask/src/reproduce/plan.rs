@@ -248,14 +248,19 @@ pub struct Run {
     pub epochs: usize,
     pub seed: u64,
     pub column: &'static Column,
+    /// Test and validation meshes drawn by shape (`TrainConfig::split_by_shape`), so copies
+    /// of one shape stay on one side; otherwise mesh by mesh.
+    pub by_shape: bool,
 }
 
 impl Run {
-    /// `WORK/<data set>/<protocol>/e<epochs>/seed<seed>`: the runs sharing a split.
+    /// `WORK/<data set>/<protocol>/e<epochs>/seed<seed>`: the runs sharing a split
+    /// (`e<epochs>-by-mesh` for splits drawn mesh by mesh).
     pub fn seed_dir(&self, work: &Path) -> PathBuf {
+        let split = if self.by_shape { "" } else { "-by-mesh" };
         work.join(self.dataset.name)
             .join(self.protocol.id)
-            .join(format!("e{}", self.epochs))
+            .join(format!("e{}{split}", self.epochs))
             .join(format!("seed{}", self.seed))
     }
 
@@ -275,6 +280,7 @@ impl Run {
         let mut train = TrainConfig {
             epochs: self.epochs,
             seed: self.seed,
+            split_by_shape: self.by_shape,
             ..TrainConfig::default()
         };
         (self.protocol.configure)(&mut train);
@@ -296,6 +302,7 @@ pub fn runs(
     protocol: &'static Protocol,
     epochs: usize,
     seeds: &[u64],
+    by_shape: bool,
 ) -> Vec<Run> {
     let mut out = Vec::new();
     for &dataset in datasets {
@@ -307,6 +314,7 @@ pub fn runs(
                     epochs,
                     seed,
                     column,
+                    by_shape,
                 });
             }
         }
@@ -340,7 +348,7 @@ mod tests {
         let horse = dataset("horse-gallop").unwrap();
         let synth = dataset("synthetic").unwrap();
         let protocol = &PROTOCOLS[0];
-        let runs = runs(&[synth, horse], protocol, 20, &[1, 2]);
+        let runs = runs(&[synth, horse], protocol, 20, &[1, 2], true);
         assert_eq!(runs.len(), 2 * 2 * COLUMNS.len());
         assert_eq!(runs[0].dataset.name, "synthetic");
         assert_eq!(runs.last().unwrap().seed, 2);
@@ -357,6 +365,16 @@ mod tests {
         );
         let train = r.train_config();
         assert_eq!((train.epochs, train.seed, train.val_fraction), (20, 2, 0.1));
+        assert!(train.split_by_shape);
+        let by_mesh = Run {
+            by_shape: false,
+            ..r
+        };
+        assert!(!by_mesh.train_config().split_by_shape);
+        assert_eq!(
+            by_mesh.model_dir(work),
+            Path::new("/w/synthetic/validation/e20-by-mesh/seed2/spatial")
+        );
         assert!(dataset("swing").is_none() && super::protocol("nope").is_none());
         let authors = super::protocol("select-on-test").unwrap();
         let mut t = TrainConfig::default();

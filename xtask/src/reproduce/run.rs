@@ -26,6 +26,10 @@ pub struct RunResult {
     /// Meshes held out of training to choose the checkpoint.
     #[serde(default)]
     pub val_meshes: usize,
+    /// Whether the split was drawn by shape (results from before the option read as false:
+    /// they were drawn mesh by mesh).
+    #[serde(default)]
+    pub split_by_shape: bool,
     /// Which loss chose the evaluated weights: `validation`, `train` or `test`.
     #[serde(default)]
     pub selected_on: String,
@@ -57,13 +61,14 @@ pub struct RunResult {
 
 impl RunResult {
     /// Whether this result was produced by `run` (same data set, protocol, column, seed,
-    /// epochs and network).
+    /// epochs, kind of split and network).
     pub fn matches(&self, run: &Run, model: &ModelConfig) -> bool {
         self.dataset == run.dataset.name
             && self.protocol == run.protocol.id
             && self.column == run.column.id
             && self.seed == run.seed
             && self.epochs == run.epochs
+            && self.split_by_shape == run.by_shape
             && &self.model == model
     }
 
@@ -184,6 +189,7 @@ pub fn execute(
         test_meshes: report.test.meshes,
         train_meshes: report.train.meshes,
         val_meshes: trained.split.val.len(),
+        split_by_shape: trained.spec.train.split_by_shape,
         selected_on: trained.selected_on.to_string(),
         test_rms: report.test.rms,
         test_rms_rel: report.test.rms_rel,

@@ -124,12 +124,21 @@ fn header(md: &mut String, o: &Outcome) {
             set.description
         );
     }
+    let split = if opts.by_shape {
+        "by shape: meshes with the same vertex positions (horse-gallop stores its 24-frame \
+         cycle twice) are one shape and always land on the same side, so every test shape is \
+         unseen; ⌊G/2⌋ of the G shapes train, always including mesh 0's, the rest pose every \
+         mesh's features are computed against; a set without repeats splits as mesh by mesh"
+    } else {
+        "mesh by mesh, as the paper's random halves (⌊N/2⌋ training meshes, always including \
+         mesh 0, the rest pose every mesh's features are computed against): where a set holds \
+         a shape twice, a test mesh may have its copy in training"
+    };
     let _ = writeln!(
         md,
-        "- Seeds {}: each seed draws one random split into halves (⌊N/2⌋ training meshes, always \
-         including mesh 0, the rest pose every mesh's features are computed against; the rest \
-         for testing), used by every network of that seed, and seeds the initial weights and \
-         the training.",
+        "- Seeds {}: each seed draws one random split into halves, {split}; the split is used \
+         by every network of that seed, and the seed also draws the initial weights and the \
+         training's shuffles and noise.",
         seeds.join(", ")
     );
     let _ = writeln!(
@@ -594,6 +603,7 @@ mod tests {
             params_without_biases: 900,
             best_epoch: 5,
             val_meshes: 1,
+            split_by_shape: true,
             selected_on: "validation".into(),
             test_rms_selected_on_test: Some(rms * 0.99),
             best_epoch_on_test: Some(4),
@@ -614,6 +624,7 @@ mod tests {
                 seeds: 2,
                 quick: true,
                 protocol: &PROTOCOLS[0],
+                by_shape: true,
                 work: "w".into(),
                 results: "r.md".into(),
                 command: "cargo xtask reproduce --quick".into(),
