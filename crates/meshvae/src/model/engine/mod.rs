@@ -10,8 +10,8 @@
 //! Training also evaluates the validation and test losses on the same buffers
 //! ([`Engine::rec_error`]: z = μ, the batch norms' running statistics).
 //!
-//! It covers the unconditional model with Chebyshev convolutions (any K ≤ 8, own decoder
-//! weights) and every pooling (graph pooling is a max pool over overlapping member lists,
+//! It covers the unconditional model with Chebyshev convolutions (any K ≤ 8) or spatial ones
+//! (the Chebyshev kernel with K = 2 on D⁻¹A), own decoder weights, and every pooling (graph pooling is a max pool over overlapping member lists,
 //! remeshing is mean pooling), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
 //! anything else is declined, and training then uses candle's path, which stays the reference
 //! (`tests.rs` compares the two).
@@ -24,7 +24,6 @@ mod tests;
 
 use super::MeshVae;
 use crate::adam::Adam;
-use crate::config::ConvKind;
 use crate::error::{Result, VaeError};
 use crate::loss::LossWeights;
 use candle_core::{DType, Tensor};
@@ -81,9 +80,6 @@ impl Engine {
         }
         if c.is_conditional() {
             return Some("conditional models".into());
-        }
-        if c.conv != ConvKind::Spectral {
-            return Some(format!("{} convolutions", c.conv));
         }
         if c.tie_decoder_convs {
             return Some("tied decoder convolutions".into());

@@ -3,7 +3,7 @@
 //! counts.
 
 use super::*;
-use crate::config::{ModelConfig, PoolKind};
+use crate::config::{ConvKind, ModelConfig, PoolKind};
 use crate::model::Mode;
 use crate::rng::Rng;
 use candle_core::Device;
@@ -70,8 +70,8 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     let mut engine = Engine::new(&ours, batch + 2).unwrap().unwrap();
     let got = engine.forward_backward(&ours, &x, &eps, &weights).unwrap();
     let case = format!(
-        "{} {:?} K={} {dtype:?}",
-        config.structure, config.pool, config.k
+        "{} {} {:?} K={} {dtype:?}",
+        config.structure, config.conv, config.pool, config.k
     );
     assert!(
         (got.rec - loss.rec).abs() <= tol * loss.rec.abs(),
@@ -116,6 +116,17 @@ fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
             });
         }
     }
+    // Spatial convolutions (the kernel with K = 2 on D⁻¹A, two weight variables), pooled and
+    // not (the paper's "Only Spatial Conv." column).
+    for pool in [PoolKind::Mean, PoolKind::None] {
+        configs.push(ModelConfig {
+            conv: ConvKind::Spatial,
+            pool,
+            channels: 5,
+            latent: 6,
+            ..Default::default()
+        });
+    }
     for k in [1, 2, 4] {
         configs.push(ModelConfig {
             k,
@@ -143,11 +154,14 @@ fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
 
 #[test]
 fn f32_step_is_close_to_candle() {
-    let config = ModelConfig {
-        latent: 16,
-        ..Default::default()
-    };
-    compare_step(&config, DType::F32, 4, 2e-3);
+    for conv in [ConvKind::Spectral, ConvKind::Spatial] {
+        let config = ModelConfig {
+            conv,
+            latent: 16,
+            ..Default::default()
+        };
+        compare_step(&config, DType::F32, 4, 2e-3);
+    }
 }
 
 #[test]
@@ -260,24 +274,14 @@ fn training_steps_match_candle_and_repeat_bit_for_bit_on_any_thread_count() {
 
 #[test]
 fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
-    let spatial = ModelConfig {
-        conv: ConvKind::Spatial,
-        latent: 4,
-        ..Default::default()
-    };
-    let (model, _) = models(&spatial, DType::F32);
-    assert!(Engine::unsupported(&model).unwrap().contains("spatial"));
-    assert!(Engine::new(&model, 2).unwrap().is_none());
     let tied = ModelConfig {
         tie_decoder_convs: true,
         latent: 4,
         ..Default::default()
     };
-    assert!(
-        Engine::new(&models(&tied, DType::F32).0, 2)
-            .unwrap()
-            .is_none()
-    );
+    let (model, _) = models(&tied, DType::F32);
+    assert!(Engine::unsupported(&model).unwrap().contains("tied"));
+    assert!(Engine::new(&model, 2).unwrap().is_none());
 
     let config = ModelConfig {
         latent: 4,

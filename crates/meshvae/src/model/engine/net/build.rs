@@ -1,7 +1,7 @@
 //! Building the engine's network from a model: its layer list and buffers.
 
-use super::{Acts, Bn, Conv, DenseVars, Latent, Net, Node, Pool, PoolOp, internal};
-use crate::config::FEATURE_CHANNELS;
+use super::{Acts, Bn, Conv, ConvWeight, DenseVars, Latent, Net, Node, Pool, PoolOp, internal};
+use crate::config::{ConvKind, FEATURE_CHANNELS};
 use crate::error::Result;
 use crate::model::MeshVae;
 use crate::model::engine::{Scalar, of};
@@ -48,7 +48,21 @@ impl<T: Scalar> Net<T> {
          -> Result<Node> {
             let s = block.spec;
             let v = counts[s.level];
-            let kernel = ChebKernel::new(&model.levels[s.level].op, config.k)?;
+            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions.
+            let (kernel_k, weight) = match config.conv {
+                ConvKind::Spectral => (
+                    config.k,
+                    ConvWeight::Stacked(index(&format!("{side}.conv{}.weight", s.index))?),
+                ),
+                ConvKind::Spatial => (
+                    2,
+                    ConvWeight::Pair {
+                        w_self: index(&format!("{side}.conv{}.w_self", s.index))?,
+                        w_nb: index(&format!("{side}.conv{}.w_nb", s.index))?,
+                    },
+                ),
+            };
+            let kernel = ChebKernel::new(&model.levels[s.level].op, kernel_k)?;
             let terms = acts.add(kernel.terms_len(max_batch, s.c_in));
             let pre = add(acts, v, s.c_out);
             let bn = if s.batch_norm {
@@ -75,7 +89,7 @@ impl<T: Scalar> Net<T> {
                 v,
                 ci: s.c_in,
                 co: s.c_out,
-                weight: index(&format!("{side}.conv{}.weight", s.index))?,
+                weight,
                 bn,
                 tanh: s.tanh,
                 input,
