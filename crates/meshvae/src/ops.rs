@@ -54,6 +54,7 @@ impl Real for f32 {
     fn of(x: f64) -> Self {
         x as f32
     }
+    #[inline(always)]
     fn tanh(self) -> Self {
         fast_tanh(self)
     }
@@ -93,6 +94,7 @@ impl Real for f64 {
 /// tanh in f32 without libm (whose `tanhf` costs ~20 ns, more than a whole graph convolution
 /// per element): an odd Taylor series below 0.125, else (1 − t)/(1 + t) with t = e^(−2|x|)
 /// from 2ⁿ·(degree-7 Taylor of e^r), |r| ≤ ln2/2. Relative error ≲ 5e-7 (tested against f64).
+#[inline(always)]
 fn fast_tanh(x: f32) -> f32 {
     // Branch-free (both formulas, then a select), so the loop vectorises and mixed-sign,
     // mixed-size inputs (batch norm's output) cost no mispredictions.
