@@ -47,6 +47,8 @@ pub trait Real:
     fn values(csr: &Csr) -> &[Self];
     /// The recycled buffers of this type (see `scratch.rs`).
     fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>>;
+    /// The recycled staging buffer sets of this type (see [`Staging`]).
+    fn staging_pool() -> &'static std::sync::Mutex<Vec<Vec<Vec<Self>>>>;
     /// dst[s·B + b] = runs[b][s] (see `transpose.rs`).
     fn gather_runs(runs: &[&[Self]], dst: &mut [Self]) {
         crate::transpose::gather_runs_scalar(runs, dst);
@@ -102,6 +104,9 @@ impl Real for f32 {
     fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
         &crate::scratch::POOL_F32
     }
+    fn staging_pool() -> &'static std::sync::Mutex<Vec<Vec<Vec<Self>>>> {
+        &crate::scratch::STAGING_F32
+    }
     fn gather_runs(runs: &[&[Self]], dst: &mut [Self]) {
         crate::transpose::gather_runs_f32(runs, dst);
     }
@@ -150,6 +155,9 @@ impl Real for f64 {
     }
     fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
         &crate::scratch::POOL_F64
+    }
+    fn staging_pool() -> &'static std::sync::Mutex<Vec<Vec<Vec<Self>>>> {
+        &crate::scratch::STAGING_F64
     }
 }
 
@@ -267,15 +275,35 @@ impl Csr {
     }
 }
 
-/// Per-task staging buffers: allocated once per rayon job (`for_each_init`, `fold`) rather than
-/// per chunk. Contents are left from the previous chunk; every kernel overwrites what it uses.
-pub(crate) struct Staging<T> {
+/// Per-task staging buffers: one set per rayon job (`for_each_init`, `fold`) rather than per
+/// chunk, and recycled across calls (a dropped set goes back to a pool): rayon starts a few
+/// jobs per parallel loop, and fresh sets cost page faults and zeroing in every sweep of every
+/// layer. Contents are left from earlier chunks; every kernel overwrites what it uses.
+pub(crate) struct Staging<T: Real> {
     bufs: Vec<Vec<T>>,
+}
+
+/// Staging sets kept per float type (a few per thread).
+const STAGING_KEEP: usize = 16;
+
+impl<T: Real> Drop for Staging<T> {
+    fn drop(&mut self) {
+        if let Ok(mut pool) = T::staging_pool().lock()
+            && pool.len() < STAGING_KEEP
+        {
+            pool.push(std::mem::take(&mut self.bufs));
+        }
+    }
 }
 
 impl<T: Real> Staging<T> {
     pub fn new() -> Self {
-        Self { bufs: Vec::new() }
+        let bufs = T::staging_pool()
+            .lock()
+            .ok()
+            .and_then(|mut pool| pool.pop())
+            .unwrap_or_default();
+        Self { bufs }
     }
 
     /// `N` buffers of the given lengths.

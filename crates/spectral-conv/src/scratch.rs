@@ -20,6 +20,10 @@ const MIN_LEN: usize = 1 << 16;
 pub(crate) static POOL_F32: Mutex<Vec<Vec<f32>>> = Mutex::new(Vec::new());
 pub(crate) static POOL_F64: Mutex<Vec<Vec<f64>>> = Mutex::new(Vec::new());
 
+/// Recycled [`crate::kernel::Staging`] buffer sets.
+pub(crate) static STAGING_F32: Mutex<Vec<Vec<Vec<f32>>>> = Mutex::new(Vec::new());
+pub(crate) static STAGING_F64: Mutex<Vec<Vec<Vec<f64>>>> = Mutex::new(Vec::new());
+
 /// A vector of `len` values with unspecified contents (zeros, or a previous use's values): only
 /// for buffers the caller overwrites entirely.
 pub(crate) fn take<T: Real>(len: usize) -> Vec<T> {
@@ -67,6 +71,12 @@ pub fn release_scratch() {
         pool.clear();
     }
     if let Ok(mut pool) = POOL_F64.lock() {
+        pool.clear();
+    }
+    if let Ok(mut pool) = STAGING_F32.lock() {
+        pool.clear();
+    }
+    if let Ok(mut pool) = STAGING_F64.lock() {
         pool.clear();
     }
 }

@@ -283,7 +283,10 @@ mod avx {
         // Checked once here instead of twice per load: the loop below then keeps its row
         // pointers in registers (slice bounds checks made it reload lengths from the stack;
         // a horse-gallop training step got 13 % faster).
-        assert!(f0 + F <= ci && o0 + O <= co, "dot tile outside the channels");
+        assert!(
+            f0 + F <= ci && o0 + O <= co,
+            "dot tile outside the channels"
+        );
         let (tp, gp) = (t.as_ptr(), g.as_ptr());
         for v in 0..verts {
             // SAFETY: vertex v < verts has ci·batch values in `t` and co·batch in `g`; rows
