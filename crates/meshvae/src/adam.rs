@@ -627,6 +627,72 @@ mod tests {
     }
 
     #[test]
+    fn fused_slices_update_like_the_two_ops_and_sum_the_squares() {
+        // Odd sizes: the eight-lane square sum has a ragged tail.
+        let mut rng = Rng::new(5);
+        let dev = Device::Cpu;
+        let make = |rng: &mut Rng, shape: (usize, usize)| {
+            Var::from_tensor(&rng.normal_tensor(shape, &dev).unwrap()).unwrap()
+        };
+        let (a1, b1) = (make(&mut rng, (37, 29)), make(&mut rng, (29, 11)));
+        let t = rng.normal_tensor((37, 11), &dev).unwrap();
+        let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy().unwrap()).unwrap();
+        let (a2, b2) = (copy(&a1), copy(&b1));
+        let named =
+            |a: &Var, b: &Var| vec![("a".to_string(), a.clone()), ("b".to_string(), b.clone())];
+        let mut two_ops = Adam::new(named(&a1, &b1), 1e-2).unwrap();
+        let mut fused = Adam::new(named(&a2, &b2), 1e-2).unwrap();
+        let l2 = 0.3;
+        for _ in 0..5 {
+            two_ops
+                .step_with_l2(&loss(&a1, &b1, &t).backward().unwrap(), l2)
+                .unwrap();
+            let grads = loss(&a2, &b2, &t).backward().unwrap();
+            let g: Vec<Vec<f32>> = [&a2, &b2]
+                .iter()
+                .map(|v| {
+                    grads
+                        .get(v.as_tensor())
+                        .unwrap()
+                        .flatten_all()
+                        .unwrap()
+                        .to_vec1()
+                        .unwrap()
+                })
+                .collect();
+            let expected: f64 = [&a2, &b2]
+                .iter()
+                .flat_map(|v| {
+                    v.as_tensor()
+                        .flatten_all()
+                        .unwrap()
+                        .to_vec1::<f32>()
+                        .unwrap()
+                })
+                .map(|x| 0.5 * f64::from(x) * f64::from(x))
+                .sum();
+            let half_sq = fused
+                .step_with_slices(&[g[0].as_slice(), g[1].as_slice()], l2)
+                .unwrap();
+            assert!(
+                (half_sq - expected).abs() <= 1e-12 * expected,
+                "{half_sq} vs {expected}"
+            );
+        }
+        for (x, y) in [(&a1, &a2), (&b1, &b2)] {
+            let bits = |v: &Var| -> Vec<u32> {
+                let values: Vec<f32> = v.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
+                values.iter().map(|f| f.to_bits()).collect()
+            };
+            assert_eq!(
+                bits(x),
+                bits(y),
+                "the fused update differs from the two ops"
+            );
+        }
+    }
+
+    #[test]
     fn state_round_trip_resumes_exactly() {
         let (a, b, t) = setup(2);
         let vars = || vec![("a".to_owned(), a.clone()), ("b".to_owned(), b.clone())];
