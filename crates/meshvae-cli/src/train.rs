@@ -284,7 +284,7 @@ pub struct EvalArgs {
     /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
     /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance, params,
     /// params_without_biases, epochs, best_epoch, selected_on, vertices, test_meshes,
-    /// val_meshes, train_meshes).
+    /// val_meshes, train_meshes, split_by_shape).
     #[arg(long)]
     json: bool,
     /// Report the weights with the lowest TEST loss, as the authors' code chose its checkpoint
@@ -316,6 +316,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "test_meshes": report.test.meshes,
         "val_meshes": trained.split.val.len(),
         "train_meshes": report.train.meshes,
+        "split_by_shape": trained.spec.train.split_by_shape,
     });
     if args.json {
         let text = serde_json::to_string_pretty(&value)
@@ -352,6 +353,14 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         epochs.1,
         trained.selected_on,
         trained.split.val.len()
+    );
+    println!(
+        "  split        {}",
+        if trained.spec.train.split_by_shape {
+            "random, by shape (copies of one shape on one side)"
+        } else {
+            "random, mesh by mesh"
+        }
     );
     Ok(())
 }

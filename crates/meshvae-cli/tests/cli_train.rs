@@ -106,6 +106,7 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         "vertices",
         "selected_on",
         "val_meshes",
+        "split_by_shape",
     ] {
         assert!(v.get(key).is_some(), "eval --json lacks {key}: {json}");
     }
@@ -117,6 +118,7 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     );
     assert_eq!(v["train_meshes"], 3);
     let text = ok(&meshvae(&["eval", s(&model)]));
+    assert!(text.contains("split        random, by shape"), "{text}");
     assert!(
         text.contains("chosen on the validation loss; 1 validation meshes")
             && !text.contains("SELECTED ON TEST"),
