@@ -32,49 +32,20 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
 
     // Another run into the same folder is refused; --resume continues, --force replaces.
     fails_with(&train(&[]), 1, "already holds a model");
-    let out = ok(&meshvae(&[
-        "train",
-        s(&set),
-        "--out",
-        s(&model),
-        "--epochs",
-        "3",
-        "--resume",
-        "--quiet",
-    ]));
+    let resume = |extra: &[&str]| {
+        let mut args = vec!["train", s(&set), "--out", s(&model), "--resume", "--quiet"];
+        args.extend_from_slice(extra);
+        meshvae(&args)
+    };
+    let out = ok(&resume(&["--epochs", "3"]));
     assert!(out.contains("trained 1 epoch(s)"), "{out}");
-    fails_with(
-        &meshvae(&[
-            "train",
-            s(&set),
-            "--out",
-            s(&model),
-            "--resume",
-            "--lr",
-            "0.5",
-            "--quiet",
-        ]),
-        1,
-        "cannot resume",
-    );
+    fails_with(&resume(&["--lr", "0.5"]), 1, "cannot resume");
     // The split is drawn by shape unless asked otherwise, and a model keeps its kind of split.
     let split = |dir: &std::path::Path| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(dir.join("split.json")).unwrap()).unwrap()
     };
     assert_eq!(split(&model)["by_shape"], true);
-    fails_with(
-        &meshvae(&[
-            "train",
-            s(&set),
-            "--out",
-            s(&model),
-            "--resume",
-            "--split-by-mesh",
-            "--quiet",
-        ]),
-        1,
-        "cannot resume",
-    );
+    fails_with(&resume(&["--split-by-mesh"]), 1, "cannot resume");
     let by_mesh = dir.join("by-mesh");
     ok(&meshvae(&[
         "train",
