@@ -4,12 +4,13 @@
 //! folder (config, weights, hierarchy, normalisation, split, template), reconstructions of
 //! unseen shapes and their RMS errors.
 //!
-//! The pipeline: ACAP features (`deform-features`) → normalisation fitted on the training split
-//! → a [`MeshVae`] whose graph operators come from a `mesh_hierarchy::Hierarchy` (Chebyshev or
-//! spatial convolutions from `spectral-conv`, pooling by edge contraction) → training with
-//! Adam, checkpoints and resumption → evaluation. On the CPU, training runs a hand-written
-//! forward + backward over reused buffers ([`Engine`], checked against candle's autograd) when
-//! it supports the model, and candle's autograd otherwise. A conditional model
+//! The pipeline: a random split by shape (copies of one pose on one side, [`Split`]) → ACAP
+//! features (`deform-features`) → normalisation fitted on the training split → a [`MeshVae`]
+//! whose graph operators come from a `mesh_hierarchy::Hierarchy` (Chebyshev or spatial
+//! convolutions from `spectral-conv`, pooling by edge contraction) → training with Adam,
+//! checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
+//! backward over reused buffers ([`Engine`], checked against candle's autograd) when it
+//! supports the model, and candle's autograd otherwise. A conditional model
 //! (`ModelConfig::labels`) also takes each mesh's label (see `model/cond.rs`); generation,
 //! interpolation and embedding work on the trained folder ([`TrainedModel`]).
 //!
@@ -36,7 +37,7 @@
 //!     train: TrainConfig { epochs: 2, batch: 4, ..TrainConfig::default() },
 //!     features: Default::default(),
 //!     hierarchy: Default::default(),
-//!     split: None, // random halves from the seed
+//!     split: None, // random halves from the seed, copies of one shape on one side
 //! };
 //! let options = TrainOptions { force: true, ..TrainOptions::default() };
 //! let summary = train(&request, &options, |epoch| println!("{epoch:?}"))?;
