@@ -1,7 +1,22 @@
 //! Dense products on the engine's buffers with the `gemm` crate (the kernel candle's matmul
 //! runs), writing into preallocated outputs instead of fresh tensors.
+//!
+//! One shape gets its own parallel split: a batch-by-latent product over the whole flattened
+//! mesh (m = B, n = 128, k = V₂·9 ≈ 38,000 on horse-gallop: μ, σ and ∂L/∂z). `gemm` shares
+//! out rows and columns, of which there are too few, so two threads ran it slower than one
+//! (14.5 against 11.2 ms). Here the k axis is cut into fixed slices whose products are
+//! summed in slice order (5.7–5.9 ms), the same sums whatever the thread count.
 
 use super::Scalar;
+use rayon::prelude::*;
+
+/// The k slice of a split product (fixed, so that the result does not depend on the threads).
+const K_SLICE: usize = 2048;
+
+/// Products with at most this many output elements and k at least `SPLIT_K_MIN` are split
+/// along k.
+const SPLIT_MN_MAX: usize = 64 * 256;
+const SPLIT_K_MIN: usize = 4 * K_SLICE;
 
 /// A matrix view: element (r, c) at `data[r·rs + c·cs]`.
 #[derive(Clone, Copy)]
@@ -77,16 +92,85 @@ pub(super) fn matmul<T: Scalar>(
         }
         return;
     }
+    if m * n <= SPLIT_MN_MAX && k >= SPLIT_K_MIN {
+        split_k(dst, (dst_rs, dst_cs), lhs, rhs, (m, n, k), accumulate);
+        return;
+    }
+    // SAFETY: as `product` asks: every view fits its slice (checked above), `dst` aliases
+    // neither input.
+    unsafe { product(dst, (dst_rs, dst_cs), lhs, rhs, (m, n, k), accumulate, true) }
+}
+
+/// [`matmul`] for few outputs and a long k: each slice of k into its own `m × n` partial
+/// product, in parallel, then dst = [dst +] Σ partials in slice order.
+fn split_k<T: Scalar>(
+    dst: &mut [T],
+    (dst_rs, dst_cs): (usize, usize),
+    lhs: Mat<'_, T>,
+    rhs: Mat<'_, T>,
+    (m, n, k): (usize, usize, usize),
+    accumulate: bool,
+) {
+    let zero = <T as crate::ops::Real>::of(0.0);
+    let mut partials = vec![zero; k.div_ceil(K_SLICE) * m * n];
+    partials
+        .par_chunks_mut(m * n)
+        .enumerate()
+        .for_each(|(s, part)| {
+            let k0 = s * K_SLICE;
+            let kn = K_SLICE.min(k - k0);
+            let l = Mat {
+                data: &lhs.data[k0 * lhs.cs..],
+                ..lhs
+            };
+            let r = Mat {
+                data: &rhs.data[k0 * rhs.rs..],
+                ..rhs
+            };
+            // SAFETY: the slices start at column k0 of lhs and row k0 of rhs, which exist
+            // (k0 < k); their m × kn and kn × n views fit as the whole views did; `part` is
+            // m × n row-major and borrowed mutably.
+            unsafe { product(part, (n, 1), l, r, (m, n, kn), false, false) }
+        });
+    for r in 0..m {
+        for c in 0..n {
+            let d = &mut dst[r * dst_rs + c * dst_cs];
+            let mut sum = if accumulate { *d } else { zero };
+            for part in partials.chunks_exact(m * n) {
+                sum += part[r * n + c];
+            }
+            *d = sum;
+        }
+    }
+}
+
+/// dst = [dst +] lhs · rhs with `gemm`, on the rayon pool if `parallel`.
+///
+/// # Safety
+/// The m × k, k × n and m × n views must lie inside `lhs.data`, `rhs.data` and `dst`.
+unsafe fn product<T: Scalar>(
+    dst: &mut [T],
+    (dst_rs, dst_cs): (usize, usize),
+    lhs: Mat<'_, T>,
+    rhs: Mat<'_, T>,
+    (m, n, k): (usize, usize, usize),
+    accumulate: bool,
+    parallel: bool,
+) {
     let one = <T as crate::ops::Real>::of(1.0);
-    let threads = rayon::current_num_threads();
+    let threads = if parallel {
+        rayon::current_num_threads()
+    } else {
+        1
+    };
     let parallelism = if threads > 1 {
         gemm::Parallelism::Rayon(threads)
     } else {
         gemm::Parallelism::None
     };
-    // SAFETY: every element the product reads or writes lies inside its slice (checked above,
-    // strides are non-negative), `dst` is borrowed mutably and so aliases neither input, and T
-    // is f32 or f64, which `gemm` supports. Why not candle's matmul: it returns a fresh tensor,
+    // SAFETY: every element the product reads or writes lies inside its slice (the caller's
+    // promise; strides are non-negative), `dst` is borrowed mutably and so aliases neither
+    // input, and T is f32 or f64, which `gemm` supports. Why not candle's matmul: it returns a fresh tensor,
     // and the dense weight gradients are ~100 MB each on a 42k-vertex mesh (fresh pages every
     // step); this writes into the engine's buffers.
     unsafe {
@@ -144,5 +228,34 @@ mod tests {
         }
         matmul(&mut dst, (1, m), lhs, rhs, (m, n, k), false);
         assert!((dst[0] - (0..k).map(|j| a[j * m] * b[j * n]).sum::<f64>()).abs() < 1e-12);
+    }
+
+    /// The μ / σ shape: few outputs, k long enough to be cut into slices.
+    #[test]
+    fn long_k_products_are_split_match_a_naive_loop_and_ignore_the_thread_count() {
+        let (m, n, k) = (3usize, 5usize, 2 * SPLIT_K_MIN + 17);
+        let a: Vec<f64> = (0..m * k).map(|i| (i as f64 * 0.37).sin()).collect();
+        let b: Vec<f64> = (0..k * n).map(|i| (i as f64 * 0.91).cos()).collect();
+        // As the engine stores them: lhs `[k, m]` (a column-major m × k view), rhs row-major.
+        let (lhs, rhs) = (Mat::col_major(&a, m), Mat::row_major(&b, n));
+        let run = |threads: usize, accumulate: bool| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("a thread pool");
+            let mut dst = vec![1.0; m * n];
+            pool.install(|| matmul(&mut dst, (n, 1), lhs, rhs, (m, n, k), accumulate));
+            dst
+        };
+        let (one, three) = (run(1, true), run(3, true));
+        assert_eq!(one, three, "the thread count changed the sums");
+        for r in 0..m {
+            for c in 0..n {
+                let want = 1.0 + (0..k).map(|j| a[r + j * m] * b[j * n + c]).sum::<f64>();
+                assert!((one[r * n + c] - want).abs() < 1e-9, "({r}, {c})");
+            }
+        }
+        let fresh = run(2, false);
+        assert!((fresh[0] - (one[0] - 1.0)).abs() < 1e-12);
     }
 }

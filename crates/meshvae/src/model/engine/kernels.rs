@@ -48,28 +48,61 @@ pub(super) fn to_vcb<T: Scalar>(x: &[T], out: &mut [T], (batch, v, c): (usize, u
         });
 }
 
-/// Per-channel sums of f(value, channel) over a `[V, C, B]` array, chunk partials in order.
-fn channel_sums<T: Scalar>(
-    x: &[T],
-    (c, batch): (usize, usize),
-    f: impl Fn(f64, usize) -> f64 + Sync,
-) -> Vec<f64> {
+/// Eight running f64 sums: value i of a run goes to lane i mod 8. One serial f64 sum is a chain
+/// of dependent adds (four cycles each); eight independent ones vectorise.
+type Lanes = [f64; 8];
+
+/// Σ f(run[i]) in eight lanes, in a local array (so that the lanes stay in registers).
+#[inline(always)]
+fn run_lanes<T: Scalar>(run: &[T], f: impl Fn(f64) -> f64) -> Lanes {
+    let mut acc = [0.0; 8];
+    let blocks = run.chunks_exact(8);
+    let tail = blocks.remainder();
+    for block in blocks {
+        for (l, &v) in acc.iter_mut().zip(block) {
+            *l += f(f64_of(v));
+        }
+    }
+    for (l, &v) in acc.iter_mut().zip(tail) {
+        *l += f(f64_of(v));
+    }
+    acc
+}
+
+/// Per-channel sums over a `[V, C, B]` array of the values, or (`shift` given) of their
+/// squared distances to the channel's shift; chunk partials added in order.
+fn channel_sums<T: Scalar>(x: &[T], (c, batch): (usize, usize), shift: Option<&[f64]>) -> Vec<f64> {
     let n = c * batch;
-    let partial: Vec<Vec<f64>> = x
+    let partial: Vec<Vec<Lanes>> = x
         .par_chunks(CHUNK_V * n)
         .map(|rows| {
-            let mut s = vec![0.0; c];
-            for block in rows.chunks_exact(n) {
-                for (ch, run) in block.chunks_exact(batch).enumerate() {
-                    s[ch] += run.iter().map(|&v| f(f64_of(v), ch)).sum::<f64>();
-                }
-            }
-            s
+            wide(
+                #[inline(always)]
+                || {
+                    let mut s = vec![[0.0; 8]; c];
+                    for block in rows.chunks_exact(n) {
+                        for (ch, (run, lanes)) in block.chunks_exact(batch).zip(&mut s).enumerate()
+                        {
+                            let acc = match shift {
+                                None => run_lanes(run, |v| v),
+                                Some(m) => {
+                                    let m = m[ch];
+                                    run_lanes(run, |v| (v - m) * (v - m))
+                                }
+                            };
+                            lanes.iter_mut().zip(acc).for_each(|(l, a)| *l += a);
+                        }
+                    }
+                    s
+                },
+            )
         })
         .collect();
     let mut s = vec![0.0; c];
     for p in partial {
-        s.iter_mut().zip(p).for_each(|(a, b)| *a += b);
+        s.iter_mut()
+            .zip(p)
+            .for_each(|(a, lanes)| *a += lanes.iter().sum::<f64>());
     }
     s
 }
@@ -77,11 +110,11 @@ fn channel_sums<T: Scalar>(
 /// Per-channel mean and biased variance over vertices and batch (two passes, f64).
 pub(super) fn moments<T: Scalar>(x: &[T], (c, batch): (usize, usize)) -> (Vec<f64>, Vec<f64>) {
     let count = (x.len() / c.max(1)).max(1) as f64;
-    let mean: Vec<f64> = channel_sums(x, (c, batch), |v, _| v)
+    let mean: Vec<f64> = channel_sums(x, (c, batch), None)
         .iter()
         .map(|s| s / count)
         .collect();
-    let var = channel_sums(x, (c, batch), |v, j| (v - mean[j]) * (v - mean[j]))
+    let var = channel_sums(x, (c, batch), Some(&mean))
         .iter()
         .map(|s| s / count)
         .collect();
@@ -117,9 +150,13 @@ pub(super) fn bn_forward<T: Scalar>(
                             .enumerate()
                         {
                             let (a, d) = (a[ch], d[ch]);
-                            for (o, &x) in orun.iter_mut().zip(xrun) {
-                                let y = x * a + d;
-                                *o = if tanh { crate::ops::Real::tanh(y) } else { y };
+                            // Two loops: with the test inside, tanh was computed for every
+                            // value and then thrown away where it was not wanted.
+                            let pairs = orun.iter_mut().zip(xrun);
+                            if tanh {
+                                pairs.for_each(|(o, &x)| *o = crate::ops::Real::tanh(x * a + d));
+                            } else {
+                                pairs.for_each(|(o, &x)| *o = x * a + d);
                             }
                         }
                     }
@@ -145,39 +182,61 @@ pub(super) fn bn_backward<T: Scalar>(
     let ms: Vec<T> = mean.iter().map(|&m| of(m)).collect();
     let ss: Vec<T> = inv_std.iter().map(|&s| of(s)).collect();
     let one: T = of(1.0);
-    // Pass 1: g ← g·(1 − out²) and Σ g, Σ g·x̂ per channel.
-    let partial: Vec<Vec<f64>> = g
+    // Pass 1: g ← g·(1 − out²) and Σ g, Σ g·x̂ per channel (eight local lanes each, as `run_lanes`).
+    let partial: Vec<Vec<[Lanes; 2]>> = g
         .par_chunks_mut(CHUNK_V * n)
         .zip(x.par_chunks(CHUNK_V * n).zip(out.par_chunks(CHUNK_V * n)))
         .map(|(g, (x, o))| {
-            let mut s = vec![0.0; 2 * c];
-            for ((gb, xb), ob) in g
-                .chunks_exact_mut(n)
-                .zip(x.chunks_exact(n))
-                .zip(o.chunks_exact(n))
-            {
-                for ch in 0..c {
-                    let r = ch * batch..(ch + 1) * batch;
-                    let (m, inv) = (ms[ch], ss[ch]);
-                    let (mut sg, mut sgx) = (0.0, 0.0);
-                    for ((gv, &xv), &ov) in gb[r.clone()].iter_mut().zip(&xb[r.clone()]).zip(&ob[r])
+            wide(
+                #[inline(always)]
+                || {
+                    let mut s = vec![[[0.0; 8]; 2]; c];
+                    for ((gb, xb), ob) in g
+                        .chunks_exact_mut(n)
+                        .zip(x.chunks_exact(n))
+                        .zip(o.chunks_exact(n))
                     {
-                        if tanh {
-                            *gv = *gv * (one - ov * ov);
+                        for (ch, sums) in s.iter_mut().enumerate() {
+                            let (mut sg, mut sgx) = ([0.0; 8], [0.0; 8]);
+                            let r = ch * batch..(ch + 1) * batch;
+                            let (m, inv) = (ms[ch], ss[ch]);
+                            let step = |gv: &mut T, xv: T, ov: T, sg: &mut f64, sgx: &mut f64| {
+                                if tanh {
+                                    *gv = *gv * (one - ov * ov);
+                                }
+                                *sg += f64_of(*gv);
+                                *sgx += f64_of(*gv * ((xv - m) * inv));
+                            };
+                            let mut gs = gb[r.clone()].chunks_exact_mut(8);
+                            let (mut xs, mut os) =
+                                (xb[r.clone()].chunks_exact(8), ob[r].chunks_exact(8));
+                            for ((g8, x8), o8) in (&mut gs).zip(&mut xs).zip(&mut os) {
+                                for l in 0..8 {
+                                    step(&mut g8[l], x8[l], o8[l], &mut sg[l], &mut sgx[l]);
+                                }
+                            }
+                            let tails = (gs.into_remainder(), xs.remainder(), os.remainder());
+                            for (l, ((gv, &xv), &ov)) in
+                                tails.0.iter_mut().zip(tails.1).zip(tails.2).enumerate()
+                            {
+                                step(gv, xv, ov, &mut sg[l], &mut sgx[l]);
+                            }
+                            for (acc, run) in sums.iter_mut().zip([sg, sgx]) {
+                                acc.iter_mut().zip(run).for_each(|(a, r)| *a += r);
+                            }
                         }
-                        sg += f64_of(*gv);
-                        sgx += f64_of(*gv * ((xv - m) * inv));
                     }
-                    s[ch] += sg;
-                    s[c + ch] += sgx;
-                }
-            }
-            s
+                    s
+                },
+            )
         })
         .collect();
     let mut s = vec![0.0; 2 * c];
     for p in partial {
-        s.iter_mut().zip(p).for_each(|(a, b)| *a += b);
+        for (ch, [sg, sgx]) in p.iter().enumerate() {
+            s[ch] += sg.iter().sum::<f64>();
+            s[c + ch] += sgx.iter().sum::<f64>();
+        }
     }
     let (dbeta, dgamma) = (s[..c].to_vec(), s[c..].to_vec());
     // Pass 2: dx = γ s (g − dβ/N − x̂ dγ/N).
@@ -187,15 +246,20 @@ pub(super) fn bn_backward<T: Scalar>(
     g.par_chunks_mut(CHUNK_V * n)
         .zip(x.par_chunks(CHUNK_V * n))
         .for_each(|(g, x)| {
-            for (gb, xb) in g.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
-                for ch in 0..c {
-                    let r = ch * batch..(ch + 1) * batch;
-                    let (m, inv, sc, b, gm) = (ms[ch], ss[ch], scale[ch], mb[ch], mg[ch]);
-                    for (gv, &xv) in gb[r.clone()].iter_mut().zip(&xb[r]) {
-                        *gv = sc * (*gv - b - (xv - m) * inv * gm);
+            wide(
+                #[inline(always)]
+                || {
+                    for (gb, xb) in g.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
+                        for ch in 0..c {
+                            let r = ch * batch..(ch + 1) * batch;
+                            let (m, inv, sc, b, gm) = (ms[ch], ss[ch], scale[ch], mb[ch], mg[ch]);
+                            for (gv, &xv) in gb[r.clone()].iter_mut().zip(&xb[r]) {
+                                *gv = sc * (*gv - b - (xv - m) * inv * gm);
+                            }
+                        }
                     }
-                }
-            }
+                },
+            )
         });
     (dgamma, dbeta)
 }
@@ -262,7 +326,14 @@ mod tests {
 
     #[test]
     fn layout_round_trip_and_moments() {
-        let (batch, v, c) = (3, 600, 4);
+        // 3: the 8-lane sums' tail alone; 13: a full block and a tail.
+        for batch in [3, 13] {
+            layout_round_trip_and_moments_at(batch);
+        }
+    }
+
+    fn layout_round_trip_and_moments_at(batch: usize) {
+        let (v, c) = (600, 4);
         let x: Vec<f64> = (0..batch * v * c)
             .map(|i| (i as f64 * 0.13).sin() + (i % c) as f64)
             .collect();
