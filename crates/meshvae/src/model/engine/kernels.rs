@@ -35,11 +35,12 @@ pub(super) fn to_vcb<T: Scalar>(x: &[T], out: &mut [T], (batch, v, c): (usize, u
     out.par_chunks_mut(CHUNK_V * n)
         .enumerate()
         .for_each(|(chunk, o)| {
-            let i0 = chunk * CHUNK_V;
-            for (li, block) in o.chunks_exact_mut(n).enumerate() {
-                let i = i0 + li;
-                for b in 0..batch {
-                    let row = &x[(b * v + i) * c..][..c];
+            // Mesh by mesh: each reads one contiguous run of x, and the chunk it scatters into
+            // stays in cache (vertex by vertex, the batch's B distant rows were read at once).
+            let (i0, cnt) = (chunk * CHUNK_V, o.len() / n.max(1));
+            for b in 0..batch {
+                let rows = &x[(b * v + i0) * c..][..cnt * c];
+                for (block, row) in o.chunks_exact_mut(n).zip(rows.chunks_exact(c)) {
                     for (ch, &val) in row.iter().enumerate() {
                         block[ch * batch + b] = val;
                     }
