@@ -454,12 +454,19 @@ impl FusedUpdate {
             .zip(m.par_chunks_mut(CHUNK))
             .zip(v.par_chunks_mut(CHUNK).zip(g.par_chunks(CHUNK)))
             .map(|((t, m), (v, g))| {
-                let sq = square_sum(t);
-                match with_l2 {
-                    true => update_chunk::<T, true>(k, t, m, v, g),
-                    false => update_chunk::<T, false>(k, t, m, v, g),
-                }
-                sq
+                // 8 floats per instruction instead of 4; the same operations, so the same bits
+                // (vector division and square root are exact).
+                crate::wide::wide(
+                    #[inline(always)]
+                    || {
+                        let sq = square_sum(t);
+                        match with_l2 {
+                            true => update_chunk::<T, true>(k, t, m, v, g),
+                            false => update_chunk::<T, false>(k, t, m, v, g),
+                        }
+                        sq
+                    },
+                )
             })
             .collect();
         0.5 * partial.iter().sum::<f64>()
@@ -483,7 +490,7 @@ struct Coefficients<T> {
 /// One chunk of the fused update. The coefficients arrive by value and the L2 switch as a
 /// constant: read through the closure's references they were reloaded every element (the
 /// slices might have aliased them), which kept the loop scalar (~13 % of a horse-gallop step).
-#[inline]
+#[inline(always)]
 fn update_chunk<T: Real, const L2: bool>(
     k: Coefficients<T>,
     t: &mut [T],
@@ -512,6 +519,7 @@ fn update_chunk<T: Real, const L2: bool>(
 
 /// Σx² in f64, over eight interleaved partial sums (vectorisable; the order differs from a
 /// serial sum only by rounding).
+#[inline(always)]
 fn square_sum<T: Real>(x: &[T]) -> f64 {
     let mut lanes = [0.0f64; 8];
     let blocks = x.chunks_exact(8);

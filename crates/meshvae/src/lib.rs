@@ -74,6 +74,7 @@ mod sse;
 mod structure;
 mod train;
 mod tsne;
+mod wide;
 
 pub use adam::{Adam, AdamConfig};
 pub use batch_norm::BatchNorm;
