@@ -166,15 +166,20 @@ mod avx {
             let q_n = inp.len() / batch;
             for q in 0..q_n {
                 let row = &inp[q * batch + lb..][..G * LANES];
-                let mut x = [_mm256_setzero_ps(); G];
-                for (gi, xv) in x.iter_mut().enumerate() {
-                    *xv = load(&row[gi * LANES..]);
-                }
                 let w = &m[(q_base + q) * p + o0..][..O];
-                for (a, &wv) in acc.iter_mut().zip(w) {
-                    let wv = _mm256_set1_ps(wv);
-                    for (z, &xv) in a.iter_mut().zip(&x) {
-                        *z = _mm256_fmadd_ps(xv, wv, *z);
+                let mut wv = [_mm256_setzero_ps(); O];
+                for (v, &x) in wv.iter_mut().zip(w) {
+                    *v = _mm256_set1_ps(x);
+                }
+                // One input vector at a time: the O broadcasts, one input and the O·G
+                // accumulators fit the 16 registers. With all G inputs loaded first, a 4 × 3
+                // tile needed 17 and kept two accumulators on the stack: a store-to-load chain
+                // through memory on every input row (`perf annotate`): 0.97 against 1.25 vector
+                // FMAs per cycle on one core, the same sums in the same order.
+                for gi in 0..G {
+                    let xv = load(&row[gi * LANES..]);
+                    for (a, &v) in acc.iter_mut().zip(&wv) {
+                        a[gi] = _mm256_fmadd_ps(xv, v, a[gi]);
                     }
                 }
             }
