@@ -57,6 +57,22 @@ impl SparseKernel {
         }
     }
 
+    /// The same operator on renumbered vertices: output row p is row `rows[p]` of A, and input
+    /// vertex `cols[q]` moves to position q (`None`: numbering kept). Each order must be a
+    /// permutation of its side's vertices.
+    pub fn permuted(&self, rows: Option<&[u32]>, cols: Option<&[u32]>) -> Result<Self> {
+        let row_pos = rows
+            .map(|o| crate::inverse_order(o, self.a.rows))
+            .transpose()?;
+        let col_pos = cols
+            .map(|o| crate::inverse_order(o, self.a.cols))
+            .transpose()?;
+        Ok(Self {
+            a: Arc::new(self.a.permuted(rows, col_pos.as_deref())),
+            at: Arc::new(self.at.permuted(cols, row_pos.as_deref())),
+        })
+    }
+
     /// Rows of A (output vertices).
     pub fn rows(&self) -> usize {
         self.a.rows
@@ -120,6 +136,44 @@ impl ChebKernel {
 
     pub fn k(&self) -> usize {
         self.k
+    }
+
+    /// The share of the operator's off-diagonal entries that join vertices more than `window`
+    /// positions apart: how far its gathers jump in the current numbering.
+    pub fn far_share(&self, window: usize) -> f64 {
+        let a = &self.a;
+        let (mut far, mut all) = (0usize, 0usize);
+        for r in 0..a.rows {
+            for &c in &a.indices[a.indptr[r]..a.indptr[r + 1]] {
+                if c as usize != r {
+                    all += 1;
+                    far += usize::from((c as usize).abs_diff(r) > window);
+                }
+            }
+        }
+        if all == 0 {
+            0.0
+        } else {
+            far as f64 / all as f64
+        }
+    }
+
+    /// A cache-friendly renumbering of the operator's vertices ([`crate::locality_order`] of
+    /// its pattern): `order[p]` is the vertex placed at position p.
+    pub fn locality_order(&self) -> Vec<u32> {
+        let a = &self.a;
+        crate::order::rcm(a.rows, |r| &a.indices[a.indptr[r]..a.indptr[r + 1]])
+    }
+
+    /// The same convolution on renumbered vertices (P L̃ Pᵀ, with `order[p]` the vertex at
+    /// position p): on data renumbered the same way it gives the renumbered output.
+    pub fn permuted(&self, order: &[u32]) -> Result<Self> {
+        let pos = crate::inverse_order(order, self.a.rows)?;
+        Ok(Self {
+            a: Arc::new(self.a.permuted(Some(order), Some(&pos))),
+            at: Arc::new(self.at.permuted(Some(order), Some(&pos))),
+            k: self.k,
+        })
     }
 
     pub fn vertices(&self) -> usize {
@@ -288,308 +342,5 @@ impl MaxPool {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::test_util::{random_matrix, random_vec};
-    use candle_core::{Device, Tensor};
-
-    /// `[V, C, B]` → `[V, B, C]` (the candle ops' vertex-major layout).
-    fn vcb_to_vbc(x: &[f64], (v, c, b): (usize, usize, usize)) -> Vec<f64> {
-        let mut out = vec![0.0; x.len()];
-        for i in 0..v {
-            for ch in 0..c {
-                for bb in 0..b {
-                    out[(i * b + bb) * c + ch] = x[(i * c + ch) * b + bb];
-                }
-            }
-        }
-        out
-    }
-
-    fn vbc_to_vcb(x: &[f64], (v, c, b): (usize, usize, usize)) -> Vec<f64> {
-        let mut out = vec![0.0; x.len()];
-        for i in 0..v {
-            for ch in 0..c {
-                for bb in 0..b {
-                    out[(i * c + ch) * b + bb] = x[(i * b + bb) * c + ch];
-                }
-            }
-        }
-        out
-    }
-
-    #[test]
-    fn cheb_kernel_matches_the_candle_op_with_gradients() {
-        let v = 90;
-        let m = random_matrix(v, v, 0.05, 3);
-        let op = SparseOp::new(&m, &Device::Cpu).unwrap();
-        for (k, ci, co, batch) in [(1, 3, 2, 2), (2, 9, 4, 3), (3, 9, 9, 4), (4, 2, 3, 5)] {
-            let kernel = ChebKernel::new(&op, k).unwrap();
-            let d = ConvDims {
-                batch,
-                c_in: ci,
-                c_out: co,
-            };
-            let x = random_vec(v * ci * batch, 1);
-            let w = random_vec(ci * k * co, 2);
-            let g = random_vec(v * co * batch, 4);
-            let mut terms = vec![0.0; kernel.terms_len(batch, ci)];
-            let mut y = vec![7.0; v * co * batch];
-            kernel.forward(&x, &w, d, &mut terms, &mut y).unwrap();
-            // The candle op on the same data, [V, B, C].
-            let xt = candle_core::Var::from_vec(
-                vcb_to_vbc(&x, (v, ci, batch)),
-                (v, batch, ci),
-                &Device::Cpu,
-            )
-            .unwrap();
-            let wt = candle_core::Var::from_vec(w.clone(), (ci * k, co), &Device::Cpu).unwrap();
-            let conv =
-                crate::ChebConv::from_weights(op.clone(), k, wt.as_tensor().clone(), None).unwrap();
-            let yt = conv.forward_vertex_major(xt.as_tensor()).unwrap();
-            let want = vbc_to_vcb(
-                &yt.flatten_all().unwrap().to_vec1().unwrap(),
-                (v, co, batch),
-            );
-            for (p, q) in y.iter().zip(&want) {
-                assert!((p - q).abs() < 1e-12, "K={k}: forward {p} vs {q}");
-            }
-            let gt = Tensor::from_vec(vcb_to_vbc(&g, (v, co, batch)), (v, batch, co), &Device::Cpu)
-                .unwrap();
-            let grads = (yt * gt).unwrap().sum_all().unwrap().backward().unwrap();
-            let mut dw = vec![0.0; w.len()];
-            let (mut dx, mut work) = (vec![5.0; x.len()], vec![3.0; x.len()]);
-            kernel
-                .backward(&x, &terms, &w, &g, d, &mut dw, Some((&mut dx, &mut work)))
-                .unwrap();
-            let want_dw: Vec<f64> = grads
-                .get(&wt)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1()
-                .unwrap();
-            let want_dx = vbc_to_vcb(
-                &grads
-                    .get(&xt)
-                    .unwrap()
-                    .flatten_all()
-                    .unwrap()
-                    .to_vec1()
-                    .unwrap(),
-                (v, ci, batch),
-            );
-            for (p, q) in dw.iter().zip(&want_dw).chain(dx.iter().zip(&want_dx)) {
-                assert!(
-                    (p - q).abs() < 1e-10 * q.abs().max(1.0),
-                    "K={k}: {p} vs {q}"
-                );
-            }
-            // Without dx, dW is the same.
-            let mut dw2 = vec![0.0; w.len()];
-            kernel
-                .backward(&x, &terms, &w, &g, d, &mut dw2, None)
-                .unwrap();
-            assert_eq!(dw, dw2);
-        }
-        let kernel = ChebKernel::new(&op, 3).unwrap();
-        let d = ConvDims {
-            batch: 2,
-            c_in: 3,
-            c_out: 3,
-        };
-        let err = kernel
-            .forward(&[0.0; 5], &[0.0; 27], d, &mut [], &mut [0.0; 540])
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("x has 5 values"), "{err}");
-        assert!(ChebKernel::new(&op, 0).is_err() && ChebKernel::new(&op, 9).is_err());
-    }
-
-    #[test]
-    fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
-        let m = random_matrix(30, 70, 0.1, 5);
-        let op = SparseOp::new(&m, &Device::Cpu).unwrap();
-        let kernel = SparseKernel::new(&op);
-        let n = 6;
-        let x = random_vec(70 * n, 6);
-        let g = random_vec(30 * n, 7);
-        let (mut y, mut back) = (vec![0.0; 30 * n], vec![0.0; 70 * n]);
-        kernel.apply(&x, &mut y, n).unwrap();
-        kernel.apply_t(&g, &mut back, n).unwrap();
-        let want = crate::test_util::dense_apply(&m, &x, 1, n);
-        assert!(y.iter().zip(&want).all(|(p, q)| (p - q).abs() < 1e-12));
-        // <g, A x> = <Aᵀ g, x>.
-        let lhs: f64 = g.iter().zip(&y).map(|(a, b)| a * b).sum();
-        let rhs: f64 = back.iter().zip(&x).map(|(a, b)| a * b).sum();
-        assert!((lhs - rhs).abs() < 1e-10 * lhs.abs().max(1.0));
-        assert!(kernel.apply(&x[1..], &mut y, n).is_err());
-
-        let pool = MaxPool::new(&m, &Device::Cpu).unwrap();
-        let (mut py, mut arg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
-        pool.forward_into(&x, &mut py, &mut arg, n).unwrap();
-        let xt = Tensor::from_vec(x.clone(), (70, 1, n), &Device::Cpu).unwrap();
-        let want: Vec<f64> = pool
-            .forward_vertex_major(&xt)
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap();
-        assert_eq!(py, want);
-        let mut dx = vec![9.0; 70 * n];
-        pool.backward_into(&arg, &g, &mut dx, n).unwrap();
-        let lhs: f64 = g.iter().zip(&py).map(|(a, b)| a * b).sum();
-        let rhs: f64 = dx.iter().zip(&x).map(|(a, b)| a * b).sum();
-        assert!((lhs - rhs).abs() < 1e-10 * lhs.abs().max(1.0));
-    }
-
-    #[test]
-    fn graph_max_pool_buffers_match_the_candle_op_and_its_gradient() {
-        // Overlapping member lists: each coarse vertex takes a random ~10% of 70 fine ones.
-        let m = random_matrix(30, 70, 0.1, 11);
-        let pool = MaxPool::with_mode(&m, crate::MaxMode::Plain, &Device::Cpu).unwrap();
-        let n = 6;
-        let x = random_vec(70 * n, 12);
-        let g = random_vec(30 * n, 13);
-        let (mut y, mut arg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
-        pool.forward_into(&x, &mut y, &mut arg, n).unwrap();
-        let xt = candle_core::Var::from_vec(x.clone(), (70, 1, n), &Device::Cpu).unwrap();
-        let yt = pool.forward_vertex_major(xt.as_tensor()).unwrap();
-        let want: Vec<f64> = yt.flatten_all().unwrap().to_vec1().unwrap();
-        assert_eq!(y, want);
-        let gt = Tensor::from_vec(g.clone(), (30, 1, n), &Device::Cpu).unwrap();
-        let grads = (yt * gt).unwrap().sum_all().unwrap().backward().unwrap();
-        let want_dx: Vec<f64> = grads
-            .get(xt.as_tensor())
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap();
-        let mut dx = vec![9.0; 70 * n];
-        pool.backward_into(&arg, &g, &mut dx, n).unwrap();
-        for (p, q) in dx.iter().zip(&want_dx) {
-            assert!((p - q).abs() < 1e-14, "{p} vs {q}");
-        }
-        // Some fine vertex was selected by more than one row and got the sum.
-        let mut times = vec![0usize; 70 * n];
-        for (i, &j) in arg.iter().enumerate() {
-            if j != u32::MAX {
-                times[j as usize * n + i % n] += 1;
-            }
-        }
-        assert!(times.iter().any(|&t| t > 1));
-        assert!(pool.backward_into(&arg, &g[1..], &mut dx, n).is_err());
-    }
-
-    #[test]
-    fn max_pool_blocks_match_a_plain_loop_and_unpool_is_the_same_on_any_thread_count() {
-        // 40 values per vertex: two blocks of 16 and a tail of 8 in the forward kernel.
-        let m = random_matrix(50, 120, 0.08, 14);
-        let n = 40;
-        let x = random_vec(120 * n, 15);
-        let g = random_vec(50 * n, 16);
-        for mode in [crate::MaxMode::Plain, crate::MaxMode::SignedMagnitude] {
-            let pool = MaxPool::with_mode(&m, mode, &Device::Cpu).unwrap();
-            let (mut y, mut arg) = (vec![0.0; 50 * n], vec![0u32; 50 * n]);
-            pool.forward_into(&x, &mut y, &mut arg, n).unwrap();
-            for r in 0..50 {
-                for k in 0..n {
-                    let (mut best, mut at) = (0.0f64, u32::MAX);
-                    for &j in m.row(r).0 {
-                        let v = x[j as usize * n + k];
-                        let better = match mode {
-                            crate::MaxMode::Plain => v > best,
-                            crate::MaxMode::SignedMagnitude => {
-                                v.abs() > best.abs() || (v.abs() == best.abs() && v < best)
-                            }
-                        };
-                        if at == u32::MAX || better {
-                            (best, at) = (v, j);
-                        }
-                    }
-                    assert_eq!((y[r * n + k], arg[r * n + k]), (best, at), "{mode:?}");
-                }
-            }
-            let run = |threads: usize| {
-                let mut dx = vec![0.0; 120 * n];
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap()
-                    .install(|| pool.backward_into(&arg, &g, &mut dx, n).unwrap());
-                dx
-            };
-            let one = run(1);
-            assert_eq!(one, run(2));
-            assert_eq!(one, run(5));
-            // And it is the plain scatter-add.
-            let mut want = vec![0.0; 120 * n];
-            for (i, &j) in arg.iter().enumerate() {
-                if j != u32::MAX {
-                    want[j as usize * n + i % n] += g[i];
-                }
-            }
-            assert_eq!(one, want);
-        }
-    }
-
-    /// Timing probe (not a test of results): `cargo test --release -p spectral-conv --lib --
-    /// --ignored --nocapture graph_pool_timing_probe`. Graph max pooling on a 205×205 grid
-    /// (clusters of two vertices, so about half survive) at n = 288 values per vertex (B = 32,
-    /// C = 9), against mean pooling over the same clusters.
-    #[test]
-    #[ignore]
-    fn graph_pool_timing_probe() {
-        let (rows, cols) = (205usize, 205usize);
-        let v = rows * cols;
-        let faces = crate::test_util::grid_faces(rows, cols);
-        let half = cols.div_ceil(2);
-        let cluster_of: Vec<u32> = (0..v)
-            .map(|u| ((u / cols) * half + (u % cols) / 2) as u32)
-            .collect();
-        let survivors: Vec<u32> = (0..rows * half)
-            .map(|c| ((c / half) * cols + (c % half) * 2) as u32)
-            .collect();
-        let members =
-            mesh_hierarchy::graph::neighbourhoods(&faces, &survivors, &cluster_of).unwrap();
-        let m = members.rows();
-        let n = 288;
-        let x: Vec<f32> = random_vec(v * n, 1).iter().map(|&a| a as f32).collect();
-        let pool = MaxPool::with_mode(&members, crate::MaxMode::Plain, &Device::Cpu).unwrap();
-        let signed = MaxPool::new(&members, &Device::Cpu).unwrap();
-        let (mut y, mut arg, mut dx) = (vec![0f32; m * n], vec![0u32; m * n], vec![0f32; v * n]);
-        // The fastest of 10 calls: the machine is shared.
-        let time = |label: &str, f: &mut dyn FnMut()| {
-            let mut best = f64::INFINITY;
-            for _ in 0..10 {
-                let t = std::time::Instant::now();
-                f();
-                best = best.min(t.elapsed().as_secs_f64() * 1e3);
-            }
-            println!("{label}: {best:.1} ms");
-        };
-        println!("{v} -> {m} vertices, {} memberships", members.nnz());
-        time("graph pool forward_into", &mut || {
-            pool.forward_into(&x, &mut y, &mut arg, n).unwrap()
-        });
-        time("signed max pool forward_into", &mut || {
-            signed.forward_into(&x, &mut y, &mut arg, n).unwrap()
-        });
-        time("graph pool backward_into", &mut || {
-            pool.backward_into(&arg, &y, &mut dx, n).unwrap()
-        });
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        time("graph pool backward_into, 1 thread", &mut || {
-            one.install(|| pool.backward_into(&arg, &y, &mut dx, n).unwrap())
-        });
-        let mean = SparseKernel::new(&SparseOp::new(&members, &Device::Cpu).unwrap());
-        time("sparse product, same pattern", &mut || {
-            mean.apply(&x, &mut y, n).unwrap()
-        });
-    }
-}
+#[path = "buffers_tests.rs"]
+mod tests;

@@ -273,6 +273,39 @@ impl Csr {
         let span = self.indptr[r]..self.indptr[r + 1];
         (&self.indices[span.clone()], &T::values(self)[span])
     }
+
+    /// The matrix with renumbered rows and columns: row p of the result is row `rows[p]` of
+    /// this one, and column `c` becomes the position of `c` in the column order (`col_pos`,
+    /// the inverse of that order). `None` keeps the numbering. Each row's entries are sorted
+    /// by their new column.
+    pub fn permuted(&self, rows: Option<&[u32]>, col_pos: Option<&[u32]>) -> Self {
+        let mut out = Self {
+            rows: self.rows,
+            cols: self.cols,
+            indptr: Vec::with_capacity(self.rows + 1),
+            indices: Vec::with_capacity(self.nnz()),
+            values_f32: Vec::with_capacity(self.nnz()),
+            values_f64: Vec::with_capacity(self.nnz()),
+        };
+        out.indptr.push(0);
+        let mut entries: Vec<(u32, usize)> = Vec::new();
+        for p in 0..self.rows {
+            let r = rows.map_or(p, |o| o[p] as usize);
+            entries.clear();
+            entries.extend((self.indptr[r]..self.indptr[r + 1]).map(|e| {
+                let c = self.indices[e];
+                (col_pos.map_or(c, |pos| pos[c as usize]), e)
+            }));
+            entries.sort_unstable();
+            for &(c, e) in &entries {
+                out.indices.push(c);
+                out.values_f32.push(self.values_f32[e]);
+                out.values_f64.push(self.values_f64[e]);
+            }
+            out.indptr.push(out.indices.len());
+        }
+        out
+    }
 }
 
 /// Per-task staging buffers: one set per rayon job (`for_each_init`, `fold`) rather than per

@@ -24,10 +24,15 @@ pub fn locality_order(pattern: &CsrMatrix) -> Result<Vec<u32>> {
             format!("must be square, is {}x{}", n, pattern.cols()),
         ));
     }
+    Ok(rcm(n, |r| pattern.row(r).0))
+}
+
+/// [`locality_order`] of the pattern whose row `r` has the columns `row(r)` (n × n).
+pub(crate) fn rcm<'a>(n: usize, row: impl Fn(usize) -> &'a [u32]) -> Vec<u32> {
     // Symmetrised neighbour lists without self-loops.
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
     for r in 0..n {
-        for &c in pattern.row(r).0 {
+        for &c in row(r) {
             if c as usize != r {
                 neighbours[r].push(c);
                 neighbours[c as usize].push(r as u32);
@@ -58,7 +63,7 @@ pub fn locality_order(pattern: &CsrMatrix) -> Result<Vec<u32>> {
         }
     }
     order.reverse();
-    Ok(order)
+    order
 }
 
 /// Breadth-first search from `start` over unplaced vertices, neighbours in increasing degree;

@@ -11,18 +11,25 @@ use rayon::prelude::*;
 const CHUNK_V: usize = 256;
 
 /// x `[B, V, C]` → out `[V, C, B]`.
-pub(super) fn to_vcb<T: Scalar>(x: &[T], out: &mut [T], (batch, v, c): (usize, usize, usize)) {
+pub(super) fn to_vcb<T: Scalar>(
+    x: &[T],
+    out: &mut [T],
+    (batch, v, c): (usize, usize, usize),
+    order: Option<&[u32]>,
+) {
     let n = c * batch;
     out.par_chunks_mut(CHUNK_V * n)
         .enumerate()
         .for_each(|(chunk, o)| {
-            // Mesh by mesh: each reads one contiguous run of x, and the chunk it scatters into
-            // stays in cache (vertex by vertex, the batch's B distant rows were read at once).
-            let (i0, cnt) = (chunk * CHUNK_V, o.len() / n.max(1));
+            // Mesh by mesh: each reads one run of x (contiguous unless renumbered), and the
+            // chunk it scatters into stays in cache (vertex by vertex, the batch's B distant
+            // rows were read at once).
+            let i0 = chunk * CHUNK_V;
             for b in 0..batch {
-                let rows = &x[(b * v + i0) * c..][..cnt * c];
-                for (block, row) in o.chunks_exact_mut(n).zip(rows.chunks_exact(c)) {
-                    for (ch, &val) in row.iter().enumerate() {
+                let mesh = &x[b * v * c..][..v * c];
+                for (li, block) in o.chunks_exact_mut(n).enumerate() {
+                    let i = order.map_or(i0 + li, |o| o[i0 + li] as usize);
+                    for (ch, &val) in mesh[i * c..][..c].iter().enumerate() {
                         block[ch * batch + b] = val;
                     }
                 }
@@ -320,8 +327,14 @@ mod tests {
             .map(|i| (i as f64 * 0.13).sin() + (i % c) as f64)
             .collect();
         let mut vcb = vec![0.0; x.len()];
-        to_vcb(&x, &mut vcb, (batch, v, c));
+        to_vcb(&x, &mut vcb, (batch, v, c), None);
         assert_eq!(vcb[(5 * c + 2) * batch + 1], x[(v + 5) * c + 2]);
+        // Renumbered: block p holds vertex order[p].
+        let order: Vec<u32> = (0..v as u32).rev().collect();
+        let mut moved = vec![0.0; x.len()];
+        to_vcb(&x, &mut moved, (batch, v, c), Some(&order));
+        let n = c * batch;
+        assert_eq!(moved[5 * n..][..n], vcb[(v - 6) * n..][..n]);
         let (mean, var) = moments(&vcb, (c, batch));
         for ch in 0..c {
             let vals: Vec<f64> = x.iter().skip(ch).step_by(c).copied().collect();

@@ -161,6 +161,9 @@ pub(super) struct Net<T> {
     work: Vec<T>,
     /// Batch size of the last step (0: no step yet).
     batch: usize,
+    /// The full-resolution vertices' order in the engine's buffers (`order[p]`: the template
+    /// vertex at position p), when they are renumbered for locality (see `build.rs`).
+    order: Option<Vec<u32>>,
 }
 
 fn internal(what: impl Into<String>) -> VaeError {
@@ -241,6 +244,7 @@ impl<T: Scalar> Net<T> {
             xd,
             &mut self.acts.0[self.x_buf][..n],
             (batch, self.v0, FEATURE_CHANNELS),
+            self.order.as_deref(),
         );
         let (es, el) = eps.storage_and_layout();
         let ed = cpu_slice::<T>(&es, el, "ε")?;
@@ -455,6 +459,14 @@ impl<T: Scalar> Net<T> {
             }
         }
         Ok(())
+    }
+
+    /// Whether the full-resolution vertices run in another order than the template's.
+    #[cfg(test)]
+    pub fn renumbered(&self) -> bool {
+        self.order
+            .as_ref()
+            .is_some_and(|o| o.iter().enumerate().any(|(p, &v)| p != v as usize))
     }
 
     pub fn apply_adam(&self, adam: &mut Adam, l2: f64) -> Result<f64> {
