@@ -60,6 +60,16 @@ struct ReproduceArgs {
     /// The markdown to write [default: docs/results.md in the workspace].
     #[arg(long)]
     results: Option<PathBuf>,
+    /// Folder of the finished runs' small result JSONs, in the work folder's layout [default:
+    /// the work folder]. Point it at a folder under version control to resume a reproduction
+    /// on another machine, or to regenerate the tables without the model folders.
+    #[arg(long)]
+    records: Option<PathBuf>,
+    /// Runs trained at once, the cores shared evenly between them [default: 1, one run on all
+    /// cores]. Two single-threaded runs finish sooner than two runs one after the other on two
+    /// threads; the numbers are the same.
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
     /// How the reported checkpoint is chosen: `validation` (10 % of the training half chooses
     /// it; no test mesh influences the model) or `select-on-test` (the authors' protocol: the
     /// test loss chooses it, so its errors are not on unseen data).
@@ -160,6 +170,8 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
         protocol,
         by_shape: !args.split_by_mesh,
         work: args.work.unwrap_or(default_work),
+        records: args.records,
+        jobs: args.jobs,
         results: args
             .results
             .unwrap_or_else(|| workspace().join("docs/results.md")),

@@ -178,4 +178,70 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     let again = result(&work, "synthetic", "ours");
     assert_eq!(again.test_rms, ours.test_rms);
     assert_eq!(again.best_epoch, ours.best_epoch);
+
+    // Two runs at a time, their results kept in a records folder apart from the model folders:
+    // the same numbers as one run at a time on all cores.
+    let records = dir.join("records");
+    let records_arg = records.to_str().unwrap();
+    let parallel_work = dir.join("parallel");
+    let synthetic = ["--dataset", "synthetic", "--records", records_arg];
+    reproduce_with(
+        &parallel_work,
+        &dir.join("parallel.md"),
+        &[&synthetic[..], &["--jobs", "2"]].concat(),
+    );
+    let untimed = |mut r: RunResult| {
+        (r.train_seconds, r.other_seconds, r.threads) = (0.0, 0.0, None);
+        r
+    };
+    for column in COLUMNS {
+        assert_eq!(
+            untimed(result(&records, "synthetic", column.id)),
+            untimed(result(&work, "synthetic", column.id)),
+            "{}",
+            column.id
+        );
+    }
+    assert!(
+        !parallel_work
+            .join("synthetic/validation/e2/seed1/ours.result.json")
+            .exists()
+    );
+    // Another machine with only the records trains nothing and writes the same tables.
+    let elsewhere = dir.join("elsewhere");
+    let report = reproduce_with(
+        &elsewhere,
+        &dir.join("elsewhere.md"),
+        &[&synthetic[..], &["--report-only"]].concat(),
+    );
+    let stdout = String::from_utf8_lossy(&report.stdout);
+    let runs = COLUMNS.len();
+    assert!(
+        stdout.contains(&format!("{runs} runs ({runs} reused)")),
+        "{stdout}"
+    );
+    assert!(!elsewhere.exists());
+    let md = std::fs::read_to_string(dir.join("elsewhere.md")).unwrap();
+    assert!(!md.contains("| not run |"), "{md}");
+}
+
+#[test]
+fn bad_arguments_are_errors_that_name_the_argument() {
+    for (args, named) in [
+        (&["--jobs", "0"][..], "--jobs"),
+        (&["--epochs", "0"][..], "--epochs"),
+        (&["--seeds", "0"][..], "--seeds"),
+        (&["--dataset", "swing"][..], "--dataset"),
+        (&["--protocol", "nope"][..], "--protocol"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+            .args(["reproduce", "--quiet", "--report-only", "--work"])
+            .arg(std::env::temp_dir().join("xtask-bad-arguments-never-written"))
+            .args(args)
+            .output()
+            .expect("the xtask binary runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(stderr.contains(named), "{args:?}: {stderr}");
+    }
 }

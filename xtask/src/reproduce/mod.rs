@@ -73,8 +73,16 @@ pub struct Options {
     /// Draw each seed's split by shape (`meshvae::TrainConfig::split_by_shape`); false draws it
     /// mesh by mesh, as the paper's random halves.
     pub by_shape: bool,
-    /// Folder of the model folders and run results.
+    /// Folder of the model folders (and, unless `records` says otherwise, the run results).
     pub work: PathBuf,
+    /// Folder of the finished runs' result JSONs, laid out as under `work`: small enough to
+    /// keep in version control, so a reproduction spread over several machines resumes from
+    /// the runs another machine finished, and the tables can be regenerated from them.
+    pub records: Option<PathBuf>,
+    /// Runs trained at once, each on its own share of the cores (`--jobs`); one run on all
+    /// cores is the default. The numbers do not depend on it (the engine's results are
+    /// independent of the thread count).
+    pub jobs: usize,
     /// The markdown file to write.
     pub results: PathBuf,
     /// The command line, quoted in the markdown.
@@ -87,6 +95,11 @@ pub struct Options {
 }
 
 impl Options {
+    /// Where finished runs' results are read and written.
+    pub fn records(&self) -> &Path {
+        self.records.as_deref().unwrap_or(&self.work)
+    }
+
     /// Checks the numbers.
     pub fn validate(&self) -> Result<(), ReproError> {
         if self.epochs == 0 {
@@ -98,6 +111,12 @@ impl Options {
         if self.seeds == 0 {
             return Err(ReproError::Argument {
                 arg: "--seeds",
+                message: "must be at least 1".into(),
+            });
+        }
+        if self.jobs == 0 {
+            return Err(ReproError::Argument {
+                arg: "--jobs",
                 message: "must be at least 1".into(),
             });
         }
@@ -239,63 +258,40 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
         ProgressDrawTarget::hidden()
     });
     let runs_bar = multi.add(ProgressBar::new(runs.len() as u64));
-    let epoch_bar = multi.add(ProgressBar::new(options.epochs as u64));
     if let Ok(style) =
         ProgressStyle::with_template("runs   {bar:30} {pos}/{len}  {msg}  [{elapsed_precise}]")
     {
         runs_bar.set_style(style);
     }
-    if let Ok(style) =
-        ProgressStyle::with_template("epochs {bar:30} {pos}/{len}  [{eta_precise} left]")
-    {
-        epoch_bar.set_style(style);
-    }
 
-    let checkpoint_seconds = if options.quick { 1e9 } else { 60.0 };
     let mut sets = Vec::new();
     let mut results = Vec::new();
     let mut reused = 0;
     let mut unfinished = 0;
     for &dataset in &options.datasets {
         let loaded = load(dataset, options.quick)?;
+        let mut pending = Vec::new();
         for run in runs.iter().filter(|r| r.dataset.name == dataset.name) {
-            runs_bar.set_message(run.name());
-            if let Some(done) = run::finished(run, &options.work)? {
+            if let Some(done) = run::finished(run, options.records())? {
                 reused += 1;
                 results.push(done);
                 runs_bar.inc(1);
-                continue;
-            }
-            if options.report_only {
+            } else if options.report_only {
                 unfinished += 1;
                 runs_bar.inc(1);
-                continue;
+            } else {
+                pending.push(run);
             }
-            epoch_bar.reset();
-            epoch_bar.set_length(run.epochs as u64);
-            let result = run::execute(
-                run,
-                &loaded.set,
-                loaded.source.clone(),
-                &options.work,
-                checkpoint_seconds,
-                |epoch| epoch_bar.set_position(epoch as u64),
-            )?;
-            multi.suspend(|| {
-                println!(
-                    "{}: test RMS {:.5} ({:.3e} of the diagonal), {:.1} s",
-                    run.name(),
-                    result.test_rms,
-                    result.test_rms_rel,
-                    result.train_seconds + result.other_seconds
-                )
-            });
-            results.push(result);
-            runs_bar.inc(1);
         }
+        let trainer = Trainer {
+            options: &options,
+            loaded: &loaded,
+            multi: &multi,
+            runs_bar: &runs_bar,
+        };
+        results.extend(trainer.train_all(&pending)?);
         sets.push(loaded);
     }
-    epoch_bar.finish_and_clear();
     runs_bar.finish_and_clear();
     if unfinished > 0 {
         notes.push(format!(
@@ -323,6 +319,107 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     };
     write_results(&outcome)?;
     Ok(outcome)
+}
+
+/// Trains one data set's unfinished runs, `options.jobs` at a time.
+struct Trainer<'a> {
+    options: &'a Options,
+    loaded: &'a LoadedSet,
+    multi: &'a MultiProgress,
+    runs_bar: &'a ProgressBar,
+}
+
+impl Trainer<'_> {
+    /// Results in the order of `pending`; the first error stops every job after its current
+    /// run (whose checkpoint lets the next invocation resume it).
+    fn train_all(&self, pending: &[&Run]) -> Result<Vec<RunResult>, ReproError> {
+        let jobs = self.options.jobs.min(pending.len()).max(1);
+        if jobs == 1 {
+            return pending.iter().map(|run| self.train(run)).collect();
+        }
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = (cores / jobs).max(1);
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let done = std::sync::Mutex::new(Vec::new());
+        let failed = std::sync::Mutex::new(None);
+        std::thread::scope(|scope| {
+            for _ in 0..jobs {
+                scope.spawn(|| {
+                    let pool = match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+                        Ok(pool) => pool,
+                        Err(e) => {
+                            stop.store(true, std::sync::atomic::Ordering::SeqCst);
+                            *failed.lock().unwrap_or_else(|p| p.into_inner()) =
+                                Some(ReproError::Argument {
+                                    arg: "--jobs",
+                                    message: format!("cannot start a thread pool: {e}"),
+                                });
+                            return;
+                        }
+                    };
+                    while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                        let Some(run) = pending.get(i) else { break };
+                        match pool.install(|| self.train(run)) {
+                            Ok(result) => done
+                                .lock()
+                                .unwrap_or_else(|p| p.into_inner())
+                                .push((i, result)),
+                            Err(e) => {
+                                stop.store(true, std::sync::atomic::Ordering::SeqCst);
+                                failed
+                                    .lock()
+                                    .unwrap_or_else(|p| p.into_inner())
+                                    .get_or_insert(e);
+                            }
+                        }
+                    }
+                });
+            }
+        });
+        if let Some(e) = failed.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        let mut done = done.into_inner().unwrap_or_else(|p| p.into_inner());
+        done.sort_by_key(|(i, _)| *i);
+        Ok(done.into_iter().map(|(_, result)| result).collect())
+    }
+
+    /// One run, with its own epoch bar.
+    fn train(&self, run: &Run) -> Result<RunResult, ReproError> {
+        let bar = self.multi.add(ProgressBar::new(run.epochs as u64));
+        if let Ok(style) =
+            ProgressStyle::with_template("epochs {bar:30} {pos}/{len}  {msg}  [{eta_precise} left]")
+        {
+            bar.set_style(style);
+        }
+        bar.set_message(run.name());
+        let checkpoint_seconds = if self.options.quick { 1e9 } else { 60.0 };
+        let result = run::execute(
+            run,
+            &self.loaded.set,
+            self.loaded.source.clone(),
+            &self.options.work,
+            self.options.records(),
+            checkpoint_seconds,
+            |epoch| bar.set_position(epoch as u64),
+        );
+        bar.finish_and_clear();
+        self.multi.remove(&bar);
+        let result = result?;
+        self.multi.suspend(|| {
+            println!(
+                "{}: test RMS {:.5} ({:.3e} of the diagonal), {:.1} s",
+                run.name(),
+                result.test_rms,
+                result.test_rms_rel,
+                result.train_seconds + result.other_seconds
+            )
+        });
+        self.runs_bar.inc(1);
+        Ok(result)
+    }
 }
 
 /// Writes the markdown atomically, keeping the hand-written block of the file it replaces.

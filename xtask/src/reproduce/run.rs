@@ -57,6 +57,9 @@ pub struct RunResult {
     pub train_seconds: f64,
     /// Set-up of this session (features, hierarchy) plus evaluation.
     pub other_seconds: f64,
+    /// Threads the run trained on (its session's; `--jobs` shares the cores between runs).
+    #[serde(default)]
+    pub threads: Option<usize>,
 }
 
 impl RunResult {
@@ -86,9 +89,9 @@ impl RunResult {
     }
 }
 
-/// Reads a finished run's result, if there is one for this very run.
-pub fn finished(run: &Run, work: &Path) -> Result<Option<RunResult>, ReproError> {
-    let path = run.result_path(work);
+/// Reads a finished run's result from `records`, if there is one for this very run.
+pub fn finished(run: &Run, records: &Path) -> Result<Option<RunResult>, ReproError> {
+    let path = run.result_path(records);
     if !path.is_file() {
         return Ok(None);
     }
@@ -102,12 +105,13 @@ pub fn finished(run: &Run, work: &Path) -> Result<Option<RunResult>, ReproError>
 }
 
 /// Trains and evaluates `run` on `set`, resuming its model folder if one exists, and writes its
-/// result. `on_epoch` sees each epoch as it ends.
+/// result under `records` (the same layout as `work`). `on_epoch` sees each epoch as it ends.
 pub fn execute(
     run: &Run,
     set: &MeshSet,
     source: Option<PathBuf>,
     work: &Path,
+    records: &Path,
     checkpoint_seconds: f64,
     mut on_epoch: impl FnMut(usize),
 ) -> Result<RunResult, ReproError> {
@@ -203,8 +207,12 @@ pub fn execute(
         best_epoch_on_test,
         train_seconds,
         other_seconds: (started.elapsed().as_secs_f64() - session_train).max(0.0),
+        threads: Some(rayon::current_num_threads()),
     };
-    let path = run.result_path(work);
+    let path = run.result_path(records);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| ReproError::io(parent, e))?;
+    }
     let text = serde_json::to_string_pretty(&result).map_err(|e| ReproError::Results {
         path: path.clone(),
         message: e.to_string(),

@@ -159,6 +159,29 @@ fn header(md: &mut String, o: &Outcome) {
         compute / 60.0,
         training / 60.0
     );
+    let mut threads: Vec<usize> = o.results.iter().filter_map(|r| r.threads).collect();
+    threads.sort_unstable();
+    threads.dedup();
+    if !threads.is_empty() {
+        let list: Vec<String> = threads.iter().map(|t| t.to_string()).collect();
+        let _ = writeln!(
+            md,
+            "- Threads per run: {} (`--jobs` trains several runs at once, each on its share of \
+             the cores, so their summed time can exceed the wall time; the numbers do not \
+             depend on it).",
+            list.join(", ")
+        );
+    }
+    if let Some(records) = &opts.records {
+        let _ = writeln!(
+            md,
+            "- Every run's numbers: `{}/<data set>/{}/e{}{}/seed<N>/<column>.result.json`.",
+            records.display(),
+            opts.protocol.id,
+            opts.epochs,
+            if opts.by_shape { "" } else { "-by-mesh" }
+        );
+    }
     for note in &o.notes {
         let _ = writeln!(md, "- {note}");
     }
@@ -609,6 +632,7 @@ mod tests {
             best_epoch_on_test: Some(4),
             train_seconds: 1.0,
             other_seconds: 1.0,
+            threads: None,
         }
     }
 
@@ -626,6 +650,8 @@ mod tests {
                 protocol: &PROTOCOLS[0],
                 by_shape: true,
                 work: "w".into(),
+                records: None,
+                jobs: 1,
                 results: "r.md".into(),
                 command: "cargo xtask reproduce --quick".into(),
                 progress: false,
