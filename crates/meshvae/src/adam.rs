@@ -192,7 +192,19 @@ impl Adam {
     /// variables of type `T`), plus the gradient `l2 · θ` of the L2 term as
     /// [`Self::step_with_l2`]. One fused pass per variable over θ, m, v and g, which also
     /// returns Σ ½‖θ‖² of the weights before the update (the L2 term's value, unweighted).
+    #[cfg(test)]
     pub(crate) fn step_with_slices<T: Real>(&mut self, grads: &[&[T]], l2: f64) -> Result<f64> {
+        let sources: Vec<GradSource<'_, T>> = grads.iter().map(|g| GradSource::Slice(g)).collect();
+        self.step_with_sources(&sources, l2)
+    }
+
+    /// [`Self::step_with_slices`] where a gradient may also be made row block by row block
+    /// as the pass reaches it ([`GradSource::Rows`]), never written out whole.
+    pub(crate) fn step_with_sources<T: Real>(
+        &mut self,
+        grads: &[GradSource<'_, T>],
+        l2: f64,
+    ) -> Result<f64> {
         if grads.len() != self.slots.len() {
             return Err(VaeError::argument(
                 "adam gradients",
@@ -200,19 +212,24 @@ impl Adam {
             ));
         }
         for (s, g) in self.slots.iter().zip(grads) {
-            if s.var.elem_count() != g.len() || s.var.dtype() != T::DTYPE_OF {
-                return Err(VaeError::argument(
-                    "adam gradients",
-                    format!(
-                        "{} values of {:?} for {} ({} of {:?})",
-                        g.len(),
-                        T::DTYPE_OF,
-                        s.name,
-                        s.var.elem_count(),
-                        s.var.dtype()
-                    ),
-                ));
-            }
+            let n = s.var.elem_count();
+            let what = match *g {
+                GradSource::Slice(g) if g.len() != n => format!("{} values", g.len()),
+                GradSource::Rows { row_len, .. } if row_len == 0 || n % row_len != 0 => {
+                    format!("rows of {row_len}")
+                }
+                _ if s.var.dtype() != T::DTYPE_OF => "values".to_string(),
+                _ => continue,
+            };
+            return Err(VaeError::argument(
+                "adam gradients",
+                format!(
+                    "{what} of {:?} for {} ({n} of {:?})",
+                    T::DTYPE_OF,
+                    s.name,
+                    s.var.dtype()
+                ),
+            ));
         }
         self.step += 1;
         let AdamConfig {
@@ -424,6 +441,20 @@ impl InplaceOp3 for AdamApply {
 
 /// Adam's arithmetic as [`Moment`] and [`AdamApply`] do it (same operations in the same
 /// order, so both paths update identically), fused into one pass with g ← g + l2·θ.
+/// One variable's gradient for [`Adam::step_with_sources`].
+pub(crate) enum GradSource<'a, T> {
+    /// The whole gradient, in the variable's layout.
+    Slice(&'a [T]),
+    /// A row-major gradient with `row_len` columns, made as the update reaches it:
+    /// `fill(first_row, out)` writes the rows from `first_row` on into `out` (a whole number
+    /// of rows). Each block lives in a small buffer the update reads while it is still in
+    /// cache, instead of a gradient as large as the weights being written out and read back.
+    Rows {
+        row_len: usize,
+        fill: &'a (dyn Fn(usize, &mut [T]) + Sync),
+    },
+}
+
 struct FusedUpdate {
     beta1: f64,
     beta2: f64,
@@ -436,7 +467,7 @@ struct FusedUpdate {
 
 impl FusedUpdate {
     /// Updates θ, m, v in place; returns ½Σθ² of θ before the update.
-    fn run<T: Real>(&self, theta: &mut [T], m: &mut [T], v: &mut [T], g: &[T]) -> f64 {
+    fn run<T: Real>(&self, theta: &mut [T], m: &mut [T], v: &mut [T], g: &GradSource<T>) -> f64 {
         let k = Coefficients {
             b1: T::of(self.beta1),
             c1: T::of(1.0 - self.beta1),
@@ -449,26 +480,45 @@ impl FusedUpdate {
             l2: T::of(self.l2),
         };
         let with_l2 = self.l2 != 0.0;
-        let partial: Vec<f64> = theta
-            .par_chunks_mut(CHUNK)
-            .zip(m.par_chunks_mut(CHUNK))
-            .zip(v.par_chunks_mut(CHUNK).zip(g.par_chunks(CHUNK)))
-            .map(|((t, m), (v, g))| {
-                // 8 floats per instruction instead of 4; the same operations, so the same bits
-                // (vector division and square root are exact).
-                crate::wide::wide(
-                    #[inline(always)]
-                    || {
-                        let sq = square_sum(t);
-                        match with_l2 {
-                            true => update_chunk::<T, true>(k, t, m, v, g),
-                            false => update_chunk::<T, false>(k, t, m, v, g),
-                        }
-                        sq
-                    },
-                )
-            })
-            .collect();
+        let chunk = |t: &mut [T], m: &mut [T], v: &mut [T], g: &[T]| {
+            // 8 floats per instruction instead of 4; the same operations, so the same bits
+            // (vector division and square root are exact).
+            crate::wide::wide(
+                #[inline(always)]
+                || {
+                    let sq = square_sum(t);
+                    match with_l2 {
+                        true => update_chunk::<T, true>(k, t, m, v, g),
+                        false => update_chunk::<T, false>(k, t, m, v, g),
+                    }
+                    sq
+                },
+            )
+        };
+        let partial: Vec<f64> = match *g {
+            GradSource::Slice(g) => theta
+                .par_chunks_mut(CHUNK)
+                .zip(m.par_chunks_mut(CHUNK))
+                .zip(v.par_chunks_mut(CHUNK).zip(g.par_chunks(CHUNK)))
+                .map(|((t, m), (v, g))| chunk(t, m, v, g))
+                .collect(),
+            GradSource::Rows { row_len, fill } => {
+                // Whole rows per block (CHUNK itself for rows of 128: the same partial sums).
+                let rows = (CHUNK / row_len).max(1);
+                let len = rows * row_len;
+                theta
+                    .par_chunks_mut(len)
+                    .zip(m.par_chunks_mut(len))
+                    .zip(v.par_chunks_mut(len))
+                    .enumerate()
+                    .map_init(Vec::new, |g, (i, ((t, m), v))| {
+                        g.resize(t.len(), T::of(0.0));
+                        fill(i * rows, g);
+                        chunk(t, m, v, g)
+                    })
+                    .collect()
+            }
+        };
         0.5 * partial.iter().sum::<f64>()
     }
 }
@@ -697,6 +747,53 @@ mod tests {
                 bits(y),
                 "the fused update differs from the two ops"
             );
+        }
+    }
+
+    /// A gradient made block by block ([`GradSource::Rows`], rows that do not divide the
+    /// block size, a short last block) updates exactly as the same gradient in one slice.
+    #[test]
+    fn row_sources_update_like_slices() {
+        let (rows, cols) = (300usize, 70usize);
+        let init: Vec<f32> = (0..rows * cols).map(|i| (i as f32 * 0.37).sin()).collect();
+        let var = || Var::from_vec(init.clone(), (rows, cols), &Device::Cpu).unwrap();
+        let (a, b) = (var(), var());
+        let mut sliced = Adam::new(vec![("w".to_string(), a.clone())], 1e-2).unwrap();
+        let mut by_rows = Adam::new(vec![("w".to_string(), b.clone())], 1e-2).unwrap();
+        for step in 0..3 {
+            let g: Vec<f32> = (0..rows * cols)
+                .map(|i| ((i * (step + 2)) as f32 * 0.11).cos())
+                .collect();
+            let fill = |first: usize, out: &mut [f32]| {
+                assert_eq!(out.len() % cols, 0, "not whole rows");
+                out.copy_from_slice(&g[first * cols..first * cols + out.len()]);
+            };
+            let x = sliced.step_with_slices(&[g.as_slice()], 0.3).unwrap();
+            let rows_source = GradSource::Rows {
+                row_len: cols,
+                fill: &fill,
+            };
+            let y = by_rows.step_with_sources(&[rows_source], 0.3).unwrap();
+            assert!((x - y).abs() <= 1e-12 * x, "{x} vs {y}");
+        }
+        let values =
+            |v: &Var| -> Vec<f32> { v.as_tensor().flatten_all().unwrap().to_vec1().unwrap() };
+        assert_eq!(values(&a), values(&b));
+        let moments = |o: &Adam| -> Vec<Vec<f32>> {
+            o.state_tensors().unwrap()[1..]
+                .iter()
+                .map(|(_, t)| t.flatten_all().unwrap().to_vec1().unwrap())
+                .collect()
+        };
+        assert_eq!(moments(&sliced), moments(&by_rows));
+        let fill = |_: usize, _: &mut [f32]| {};
+        for row_len in [0, 33] {
+            let bad = GradSource::Rows {
+                row_len,
+                fill: &fill,
+            };
+            let e = by_rows.step_with_sources(&[bad], 0.0).unwrap_err();
+            assert!(e.to_string().contains("rows of"), "{e}");
         }
     }
 

@@ -55,18 +55,58 @@ fn extent(rows: usize, cols: usize, rs: usize, cs: usize) -> usize {
     }
 }
 
-/// dst (m × n, strides `dst_rs`, `dst_cs`) = [dst +] lhs (m × k) · rhs (k × n).
+/// dst (m × n, strides `dst_rs`, `dst_cs`) = [dst +] lhs (m × k) · rhs (k × n), on the rayon
+/// pool.
 ///
 /// Panics (an internal error, not an input one) if a view does not fit its slice: the engine
 /// sizes every buffer from the model when it is built.
 pub(super) fn matmul<T: Scalar>(
+    dst: &mut [T],
+    dst_strides: (usize, usize),
+    lhs: Mat<'_, T>,
+    rhs: Mat<'_, T>,
+    dims: (usize, usize, usize),
+    accumulate: bool,
+) {
+    if !check_or_finish(dst, dst_strides, lhs, rhs, dims, accumulate) {
+        return;
+    }
+    let (m, n, k) = dims;
+    if m * n <= SPLIT_MN_MAX && k >= SPLIT_K_MIN {
+        split_k(dst, dst_strides, lhs, rhs, dims, accumulate);
+        return;
+    }
+    // SAFETY: as `product` asks: every view fits its slice (checked above), `dst` aliases
+    // neither input.
+    unsafe { product(dst, dst_strides, lhs, rhs, dims, accumulate, true) }
+}
+
+/// [`matmul`] on the calling thread only: for blocks of a product that the caller already
+/// runs in parallel. The same sums as [`matmul`] where that does not split k.
+pub(super) fn matmul_serial<T: Scalar>(
+    dst: &mut [T],
+    dst_strides: (usize, usize),
+    lhs: Mat<'_, T>,
+    rhs: Mat<'_, T>,
+    dims: (usize, usize, usize),
+    accumulate: bool,
+) {
+    if check_or_finish(dst, dst_strides, lhs, rhs, dims, accumulate) {
+        // SAFETY: as in `matmul`.
+        unsafe { product(dst, dst_strides, lhs, rhs, dims, accumulate, false) }
+    }
+}
+
+/// Checks that every view fits its slice (panics otherwise) and finishes the empty products;
+/// returns whether a product is left to compute.
+fn check_or_finish<T: Scalar>(
     dst: &mut [T],
     (dst_rs, dst_cs): (usize, usize),
     lhs: Mat<'_, T>,
     rhs: Mat<'_, T>,
     (m, n, k): (usize, usize, usize),
     accumulate: bool,
-) {
+) -> bool {
     assert!(
         extent(m, n, dst_rs, dst_cs) <= dst.len(),
         "gemm: dst too short"
@@ -80,7 +120,7 @@ pub(super) fn matmul<T: Scalar>(
         "gemm: rhs too short"
     );
     if m == 0 || n == 0 {
-        return;
+        return false;
     }
     if k == 0 {
         if !accumulate {
@@ -90,15 +130,9 @@ pub(super) fn matmul<T: Scalar>(
                 }
             }
         }
-        return;
+        return false;
     }
-    if m * n <= SPLIT_MN_MAX && k >= SPLIT_K_MIN {
-        split_k(dst, (dst_rs, dst_cs), lhs, rhs, (m, n, k), accumulate);
-        return;
-    }
-    // SAFETY: as `product` asks: every view fits its slice (checked above), `dst` aliases
-    // neither input.
-    unsafe { product(dst, (dst_rs, dst_cs), lhs, rhs, (m, n, k), accumulate, true) }
+    true
 }
 
 /// [`matmul`] for few outputs and a long k: each slice of k into its own `m × n` partial
@@ -257,5 +291,35 @@ mod tests {
         }
         let fresh = run(2, false);
         assert!((fresh[0] - (one[0] - 1.0)).abs() < 1e-12);
+    }
+
+    /// The dense weights' gradient shape (rows = the flattened mesh, k = the batch), made
+    /// block by block on one thread as Adam's fused pass does: the same bits as in one call.
+    #[test]
+    fn serial_row_blocks_equal_the_whole_product() {
+        let (m, n, k) = (1000usize, 24usize, 32usize);
+        let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
+        let b: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.91).cos()).collect();
+        let c: Vec<f32> = (0..m * n).map(|i| (i as f32 * 0.13).cos()).collect();
+        let rhs = Mat::row_major(&b, n);
+        let mut whole = c.clone();
+        matmul(
+            &mut whole,
+            (n, 1),
+            Mat::row_major(&a, k),
+            rhs,
+            (m, n, k),
+            true,
+        );
+        let mut blocks = c.clone();
+        for r0 in (0..m).step_by(128) {
+            let rows = 128.min(m - r0);
+            let lhs = Mat::row_major(&a[r0 * k..], k);
+            let dst = &mut blocks[r0 * n..(r0 + rows) * n];
+            matmul_serial(dst, (n, 1), lhs, rhs, (rows, n, k), true);
+        }
+        assert_eq!(whole, blocks);
+        let naive: f32 = c[n + 1] + (0..k).map(|j| a[k + j] * b[j * n + 1]).sum::<f32>();
+        assert!((blocks[n + 1] - naive).abs() < 1e-4);
     }
 }

@@ -1,9 +1,9 @@
 //! The engine's network: its layer list, buffers, forward and backward passes (see `mod.rs`).
 
-use super::gemm::{Mat, matmul};
+use super::gemm::{Mat, matmul, matmul_serial};
 use super::kernels as k;
 use super::{Scalar, StepLoss, f64_of, of};
-use crate::adam::Adam;
+use crate::adam::{Adam, GradSource};
 use crate::batch_norm::BatchNorm;
 use crate::config::FEATURE_CHANNELS;
 use crate::error::{Result, VaeError};
@@ -155,6 +155,8 @@ pub(super) struct Net<T> {
     dec_in: usize,
     x_hat: usize,
     lat: Latent<T>,
+    /// ∂L/∂(the decoder's dense output) `[V_L·C, B]`, kept for the dense weights' gradient.
+    dec_grad: Vec<T>,
     /// Gradient ping-pong buffers and the convolutions' backward work buffer.
     ga: Vec<T>,
     gb: Vec<T>,
@@ -367,28 +369,21 @@ impl<T: Scalar> Net<T> {
         Ok(())
     }
 
-    /// From ∂L/∂(dense output) in `ga` to the dense weights' gradients and ∂L/∂h in `gb`.
+    /// From ∂L/∂(dense output) in `ga` to the dense biases' gradients and ∂L/∂h in `gb`. The
+    /// dense weights' gradients are left to [`Self::dense_grad_rows`]: what they need (h, the
+    /// decoder's output gradient, z, ∂L/∂μ, ∂L/∂s) stays in the buffers.
     fn latent_backward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) {
         let (l, kf) = (self.latent, self.flat);
         let d = &self.dense;
         let g = &self.ga[..kf * batch];
         k::row_sums(g, batch, &mut self.grads[d.b_dec]);
+        self.dec_grad[..kf * batch].copy_from_slice(g);
         let lat = &mut self.lat;
         let (wm, ws) = (
             Mat::row_major(w[d.w_mu], l),
             Mat::row_major(w[d.w_sigma], l),
         );
-        // dW_μ = gᵀ z (the tied use), dz = g W_μ.
-        let z = Mat::row_major(&lat.z[..batch * l], l);
-        let grad_mu = &mut self.grads[d.w_mu];
-        matmul(
-            grad_mu,
-            (l, 1),
-            Mat::row_major(g, batch),
-            z,
-            (kf, l, batch),
-            false,
-        );
+        // dz = g W_μ (the tied use).
         matmul(
             &mut lat.dz,
             (l, 1),
@@ -413,29 +408,41 @@ impl<T: Scalar> Net<T> {
                 self.grads[bias][j] = of(s);
             }
         }
-        let h = Mat::row_major(&self.acts.0[self.enc_out][..kf * batch], batch);
         let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
-        let (dmu_rows, ds_rows) = (Mat::row_major(dmu, l), Mat::row_major(ds, l));
-        matmul(
-            &mut self.grads[d.w_mu],
-            (l, 1),
-            h,
-            dmu_rows,
-            (kf, l, batch),
-            true,
-        );
-        matmul(
-            &mut self.grads[d.w_sigma],
-            (l, 1),
-            h,
-            ds_rows,
-            (kf, l, batch),
-            false,
-        );
         let gb = &mut self.gb[..kf * batch];
         let (dmu_cols, ds_cols) = (Mat::col_major(dmu, l), Mat::col_major(ds, l));
         matmul(gb, (batch, 1), wm, dmu_cols, (kf, batch, l), false);
         matmul(gb, (batch, 1), ws, ds_cols, (kf, batch, l), true);
+    }
+
+    /// Rows `first..` of the last step's gradient of the dense weight `var` (`w_mu` or
+    /// `w_sigma`, row-major `[V_L·C, latent]`) into `out` (whole rows), on this thread:
+    /// dW_μ = g zᵀ + h (∂L/∂μ)ᵀ (the decoder's tied use, then the encoder's), dW_σ = h (∂L/∂s)ᵀ.
+    fn dense_grad_rows(&self, var: usize, first: usize, out: &mut [T]) {
+        let (l, batch) = (self.latent, self.batch);
+        let rows = out.len() / l;
+        let lat = &self.lat;
+        let span = first * batch..(first + rows) * batch;
+        fn block<T>(buf: &[T], span: std::ops::Range<usize>, batch: usize) -> Mat<'_, T> {
+            Mat::row_major(&buf[span], batch)
+        }
+        let h = block(&self.acts.0[self.enc_out], span.clone(), batch);
+        let dims = (rows, l, batch);
+        let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
+        if var == self.dense.w_mu {
+            let z = Mat::row_major(&lat.z[..batch * l], l);
+            matmul_serial(
+                out,
+                (l, 1),
+                block(&self.dec_grad, span, batch),
+                z,
+                dims,
+                false,
+            );
+            matmul_serial(out, (l, 1), h, Mat::row_major(dmu, l), dims, true);
+        } else {
+            matmul_serial(out, (l, 1), h, Mat::row_major(ds, l), dims, false);
+        }
     }
 
     /// r ← 0.9·r + 0.1·batch for every batch norm (as `BatchNorm` in train mode).
@@ -479,8 +486,23 @@ impl<T: Scalar> Net<T> {
                 "its variables are not the model's trainable variables in order",
             ));
         }
-        let grads: Vec<&[T]> = self.grads.iter().map(Vec::as_slice).collect();
-        adam.step_with_slices(&grads, l2)
+        let fill =
+            |var: usize| move |first: usize, out: &mut [T]| self.dense_grad_rows(var, first, out);
+        let (fill_mu, fill_sigma) = (fill(self.dense.w_mu), fill(self.dense.w_sigma));
+        let grads: Vec<GradSource<T>> = (0..self.grads.len())
+            .map(|i| match i {
+                i if i == self.dense.w_mu => GradSource::Rows {
+                    row_len: self.latent,
+                    fill: &fill_mu,
+                },
+                i if i == self.dense.w_sigma => GradSource::Rows {
+                    row_len: self.latent,
+                    fill: &fill_sigma,
+                },
+                i => GradSource::Slice(&self.grads[i]),
+            })
+            .collect();
+        adam.step_with_sources(&grads, l2)
     }
 
     pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
@@ -488,7 +510,20 @@ impl<T: Scalar> Net<T> {
             .iter()
             .zip(&self.vars)
             .zip(&self.grads)
-            .map(|((n, v), g)| {
+            .enumerate()
+            .map(|(i, ((n, v), g))| {
+                let dense = [self.dense.w_mu, self.dense.w_sigma].contains(&i);
+                let made;
+                let g = if dense {
+                    let mut all = vec![of(0.0); v.elem_count()];
+                    if self.batch > 0 {
+                        self.dense_grad_rows(i, 0, &mut all);
+                    }
+                    made = all;
+                    &made
+                } else {
+                    g
+                };
                 let values: Vec<f64> = g.iter().map(|&x| f64_of(x)).collect();
                 let t = Tensor::from_vec(values, v.shape(), v.device())?.to_dtype(v.dtype())?;
                 Ok((n.clone(), t))

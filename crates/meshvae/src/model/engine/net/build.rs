@@ -35,7 +35,7 @@ impl<T: Scalar> Net<T> {
                 .map(|(_, v)| v.clone())
                 .ok_or_else(|| internal(format!("no state variable {name}")))
         };
-        let grads = vars.iter().map(|v| vec![of(0.0); v.elem_count()]).collect();
+        let mut grads: Vec<Vec<T>> = vars.iter().map(|v| vec![of(0.0); v.elem_count()]).collect();
         let counts = model.vertex_counts().to_vec();
         let config = model.config();
         let mut acts = Acts(Vec::new());
@@ -228,6 +228,10 @@ impl<T: Scalar> Net<T> {
             b_sigma: index("enc.sigma.bias")?,
             b_dec: index("dec.fc.bias")?,
         };
+        // The dense weights' gradients are made block by block inside Adam's pass
+        // (`Net::dense_grad_rows`), never whole.
+        grads[dense.w_mu] = Vec::new();
+        grads[dense.w_sigma] = Vec::new();
         Ok(Self {
             names,
             vars,
@@ -254,6 +258,7 @@ impl<T: Scalar> Net<T> {
                 dmu: lat_buf(),
                 ds: lat_buf(),
             },
+            dec_grad: vec![of(0.0); flat * max_batch],
             ga: vec![of(0.0); max_act],
             gb: vec![of(0.0); max_act],
             work: vec![of(0.0); max_act],

@@ -16,6 +16,10 @@ impl<T: Scalar> Net<T> {
         self.check_model(model)?;
         // ε = 0 makes z = μ.
         let eps = Tensor::zeros((x.dim(0)?, self.latent), x.dtype(), x.device())?;
+        // The dense weights' gradients are made from h and z when Adam runs
+        // (`Net::dense_grad_rows`), so a pending step's h and z are put back afterwards.
+        let kept =
+            (self.batch > 0).then(|| (self.acts.0[self.enc_out].clone(), self.lat.z.clone()));
         let batch = self.load_inputs(x, &eps)?;
         let (vars, names) = (self.vars.clone(), self.names.clone());
         with_weights(&vars, &names, |w| {
@@ -28,6 +32,10 @@ impl<T: Scalar> Net<T> {
             }
             Ok(())
         })?;
+        if let Some((h, z)) = kept {
+            self.acts.put(self.enc_out, h);
+            self.lat.z = z;
+        }
         let n = self.v0 * FEATURE_CHANNELS * batch;
         let (x_hat, x) = (&self.acts.0[self.x_hat][..n], &self.acts.0[self.x_buf][..n]);
         let sse: f64 = x_hat
