@@ -66,10 +66,10 @@ impl SparseKernel {
             return Ok(self.clone());
         }
         let row_pos = rows
-            .map(|o| crate::inverse_order(o, self.a.rows))
+            .map(|o| crate::order::positions(o, self.a.rows, ("SparseKernel::permuted", "rows")))
             .transpose()?;
         let col_pos = cols
-            .map(|o| crate::inverse_order(o, self.a.cols))
+            .map(|o| crate::order::positions(o, self.a.cols, ("SparseKernel::permuted", "cols")))
             .transpose()?;
         Ok(Self {
             a: Arc::new(self.a.permuted(rows, col_pos.as_deref())),
@@ -172,7 +172,7 @@ impl ChebKernel {
     /// The same convolution on renumbered vertices (P L̃ Pᵀ, with `order[p]` the vertex at
     /// position p): on data renumbered the same way it gives the renumbered output.
     pub fn permuted(&self, order: &[u32]) -> Result<Self> {
-        let pos = crate::inverse_order(order, self.a.rows)?;
+        let pos = crate::order::positions(order, self.a.rows, ("ChebKernel::permuted", "order"))?;
         Ok(Self {
             a: Arc::new(self.a.permuted(Some(order), Some(&pos))),
             at: Arc::new(self.at.permuted(Some(order), Some(&pos))),

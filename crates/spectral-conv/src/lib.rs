@@ -23,7 +23,11 @@
 //!
 //! Speed notes: use mimalloc as the global allocator (every op allocates ~50 MB tensors), and
 //! number the template's vertices with [`locality_order`] once, before building the hierarchy,
-//! if its order has little locality (see `docs/benchmarks.md`). Large intermediates are
+//! if its order has little locality (see `docs/benchmarks.md`). A network on the buffer-level
+//! kernels ([`ChebKernel`], [`SparseKernel`]) can instead renumber one level where it pays:
+//! [`ChebKernel::far_share`] measures the scatter, [`ChebKernel::locality_order`] gives an order,
+//! and [`ChebKernel::permuted`] and [`SparseKernel::permuted`] the renumbered operators
+//! (`docs/crates.md`, "Buffer-level kernels and vertex order"). Large intermediates are
 //! recycled between calls ([`release_scratch`] frees them).
 //!
 //! ```

@@ -127,10 +127,19 @@ pub fn permute_symmetric(matrix: &CsrMatrix, order: &[u32]) -> Result<CsrMatrix>
 
 /// `position[old] = new` for an order `order[new] = old`, checking it is a permutation of 0..n.
 pub fn inverse_order(order: &[u32], n: usize) -> Result<Vec<u32>> {
+    positions(order, n, ("inverse_order", "order"))
+}
+
+/// [`inverse_order`], its error naming the calling method and argument (`op`, `arg`).
+pub(crate) fn positions(
+    order: &[u32],
+    n: usize,
+    (op, arg): (&'static str, &'static str),
+) -> Result<Vec<u32>> {
     let bad = || {
         ConvError::argument(
-            "inverse_order",
-            "order",
+            op,
+            arg,
             format!("is not a permutation of 0..{n} ({} entries)", order.len()),
         )
     };
