@@ -532,6 +532,7 @@ fn resume_setup(
     hierarchy_config: HierarchyConfig,
 ) -> Result<(ModelSpec, Hierarchy, MeshData)> {
     let mut spec = folder.read_spec()?;
+    refuse_finished_without_checkpoint(folder, spec.train.epochs)?;
     let template = mesh_io::read_mesh(&folder.template())?.value;
     spec.check_set(request.set, &template, &folder.dir)?;
     let mut differences = Vec::new();
@@ -595,6 +596,40 @@ fn resume_setup(
         data = data.with_labels(labels.clone())?;
     }
     Ok((spec, hierarchy, data))
+}
+
+/// A run interrupted before its first checkpoint restarts from scratch on `--resume`, losing at
+/// most `checkpoint_seconds` of work. A *finished* run without its checkpoint (deleted by hand,
+/// or by `cargo xtask reproduce`, which keeps only the weights of the runs it has finished)
+/// would lose everything, its trained weights overwritten by a fresh run: that is refused.
+fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Result<()> {
+    let log = folder.log();
+    if folder.checkpoint().is_file() || !log.is_file() {
+        return Ok(());
+    }
+    let text = std::fs::read_to_string(&log).map_err(|e| VaeError::io(&log, e))?;
+    let logged = text
+        .lines()
+        .filter_map(|line| serde_json::from_str::<EpochRecord>(line).ok())
+        .map(|r| r.epoch)
+        .max()
+        .unwrap_or(0);
+    if logged > 0 && logged >= epochs {
+        return Err(VaeError::model(
+            &folder.dir,
+            format!(
+                "cannot resume: its run finished ({logged} epochs logged) but {}, which --resume \
+                 continues from, is gone (`cargo xtask reproduce` removes it from the runs it \
+                 has finished); the trained weights are untouched. To train longer, start a \
+                 new folder (or this one with --force) with the larger --epochs",
+                folder
+                    .checkpoint()
+                    .file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Creates `out`, refusing to overwrite a model (or any non-empty folder) unless `force`.

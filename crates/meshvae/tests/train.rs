@@ -67,6 +67,44 @@ fn resumed_training_ends_with_the_weights_of_an_uninterrupted_run() {
     resumption_is_exact(&0, "disk");
 }
 
+#[test]
+fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weights() {
+    let set = small_set(3, 8);
+    let dir = scratch("no-checkpoint");
+    train(&request(&set, &dir, 2), &options(false, false), |_| {}).unwrap();
+    let folder = ModelFolder::new(&dir);
+    std::fs::remove_file(folder.checkpoint()).unwrap();
+    let weights = std::fs::read(folder.weights()).unwrap();
+    let log = std::fs::read(folder.log()).unwrap();
+
+    let err = train(&request(&set, &dir, 4), &options(true, false), |_| {}).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("cannot resume") && msg.contains("checkpoint") && msg.contains("2 epochs"),
+        "{msg}"
+    );
+    assert_eq!(std::fs::read(folder.weights()).unwrap(), weights);
+    assert_eq!(std::fs::read(folder.log()).unwrap(), log);
+    // The config still says 2 epochs: nothing was rewritten.
+    assert!(
+        std::fs::read_to_string(folder.config())
+            .unwrap()
+            .contains("\"epochs\": 2")
+    );
+
+    // A run killed before its first checkpoint (fewer epochs logged than it was asked for)
+    // still restarts from scratch.
+    let early = scratch("no-checkpoint-early");
+    train(&request(&set, &early, 2), &options(false, false), |_| {}).unwrap();
+    let folder = ModelFolder::new(&early);
+    std::fs::remove_file(folder.checkpoint()).unwrap();
+    let text = std::fs::read_to_string(folder.log()).unwrap();
+    let first: String = text.lines().take(1).map(|l| format!("{l}\n")).collect();
+    std::fs::write(folder.log(), first).unwrap();
+    let resumed = train(&request(&set, &early, 2), &options(true, false), |_| {}).unwrap();
+    assert_eq!(resumed.epochs_run, 2);
+}
+
 fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
     let options = |resume: bool, force: bool| TrainOptions {
         best_in_memory_params: *best_in_memory_params,
