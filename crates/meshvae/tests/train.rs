@@ -103,6 +103,8 @@ fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weigh
     std::fs::write(folder.log(), first).unwrap();
     let resumed = train(&request(&set, &early, 2), &options(true, false), |_| {}).unwrap();
     assert_eq!(resumed.epochs_run, 2);
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&early);
 }
 
 fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
