@@ -1,7 +1,7 @@
 //! Times the training step `meshvae train` runs (the engine: forward, loss, backward, Adam) on
 //! a set's template at batch 32, f32, and prints one JSON line with the same keys as
 //! `benches/reference/pytorch_step.py`, so the two can be run one after the other in the same
-//! spell of the machine (its speed drifts by 20–30 % within minutes; see docs/benchmarks.md).
+//! spell of the machine (its speed drifts by 20–50 % between spells; see docs/benchmarks.md).
 //!
 //! ```text
 //! cargo run --release -p meshvae-benches --example step_time -- horse-gallop [--steps 30]

@@ -622,10 +622,7 @@ fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Re
                  continues from, is gone (`cargo xtask reproduce` removes it from the runs it \
                  has finished); the trained weights are untouched. To train longer, start a \
                  new folder (or this one with --force) with the larger --epochs",
-                folder
-                    .checkpoint()
-                    .file_name()
-                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+                folder.checkpoint().display()
             ),
         ));
     }
