@@ -1,0 +1,274 @@
+//! A run's starting point: a fresh model folder (split, hierarchy, normalisation, files) or
+//! the state of one being resumed, with the checks that keep a folder from being overwritten.
+
+use super::EpochRecord;
+use crate::config::ModelConfig;
+use crate::data::MeshData;
+use crate::error::{Result, VaeError};
+use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, VERSION};
+use crate::split::Split;
+use mesh_hierarchy::{Hierarchy, HierarchyConfig};
+use mesh_io::{MeshSet, ShapeGroups, TriMesh};
+
+use super::TrainRequest;
+
+pub(super) fn fresh_setup(
+    request: &TrainRequest,
+    folder: &ModelFolder,
+    force: bool,
+    hierarchy_config: HierarchyConfig,
+) -> Result<(ModelSpec, Hierarchy, MeshData, NewFiles)> {
+    let set = request.set;
+    let train = &request.train;
+    // Singletons split exactly as mesh by mesh, so one code path serves both settings.
+    let groups = if train.split_by_shape {
+        set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)?
+    } else {
+        ShapeGroups::singletons(set.len())
+    };
+    let split = match &request.split {
+        Some(s) => {
+            s.check(set.len())?;
+            s.clone()
+        }
+        None => Split::random_by_shape(&groups, train.test_fraction, train.seed)?,
+    }
+    .with_validation_by_shape(&groups, train.val_fraction, train.seed)?;
+    let mut split_file = SplitFile::new(&split, set.names());
+    if train.split_by_shape {
+        split_file = split_file.with_shapes(&groups);
+    }
+    let labels = mesh_labels(&request.model, set, &split)?;
+    prepare_out_dir(folder, force)?;
+    let template = set.template();
+    let hierarchy = Hierarchy::build(&template, &hierarchy_config)?;
+    let mut data = MeshData::prepare(set, split, request.features)?;
+    if let Some(labels) = &labels {
+        data = data.with_labels(labels.clone())?;
+    }
+    let spec = ModelSpec {
+        format: FORMAT.into(),
+        version: VERSION,
+        model: request.model.clone(),
+        train: request.train.clone(),
+        features: request.features,
+        hierarchy: hierarchy_config,
+        vertices: set.vertex_count(),
+        faces: set.faces().len(),
+        names: set.names().to_vec(),
+        source: request.source.clone(),
+        labels,
+    };
+    let files = NewFiles {
+        template,
+        split: split_file,
+    };
+    Ok((spec, hierarchy, data, files))
+}
+
+/// What a new model folder gets beside its spec, hierarchy and normalisation.
+pub(super) struct NewFiles {
+    pub(super) template: TriMesh,
+    pub(super) split: SplitFile,
+}
+
+/// The set's labels for a conditional model (`None` for an unconditional one), checked: every
+/// mesh has one of the model's labels and every label has a training mesh.
+fn mesh_labels(model: &ModelConfig, set: &MeshSet, split: &Split) -> Result<Option<Vec<String>>> {
+    if !model.is_conditional() {
+        return Ok(None);
+    }
+    let known = model.labels.join(", ");
+    let labels = set.labels().ok_or_else(|| {
+        VaeError::argument(
+            "labels",
+            format!(
+                "the model is conditional on {known}, but the mesh set has no labels (give a \
+                 labels file)"
+            ),
+        )
+    })?;
+    if let Some(i) = labels.iter().position(|l| !model.labels.contains(l)) {
+        return Err(VaeError::argument(
+            "labels",
+            format!(
+                "mesh {:?} has label {:?}, not one of the model's ({known})",
+                set.names()[i],
+                labels[i]
+            ),
+        ));
+    }
+    if let Some(missing) = model
+        .labels
+        .iter()
+        .find(|c| !split.train.iter().any(|&i| &labels[i] == *c))
+    {
+        return Err(VaeError::argument(
+            "labels",
+            format!(
+                "no training mesh has label {missing:?} (the split left them all for testing); \
+                 use another seed or training list"
+            ),
+        ));
+    }
+    Ok(Some(labels.to_vec()))
+}
+
+/// The files of a new model folder; the config goes last: a folder without it is not (yet) a
+/// model.
+pub(super) fn write_model_files(
+    folder: &ModelFolder,
+    spec: &ModelSpec,
+    hierarchy: &Hierarchy,
+    data: &MeshData,
+    files: &NewFiles,
+) -> Result<()> {
+    hierarchy.save(&folder.hierarchy())?;
+    folder.write_json(&folder.normalization(), &data.normalization)?;
+    folder.write_json(&folder.split(), &files.split)?;
+    mesh_io::write_mesh(&folder.template(), &files.template)?;
+    folder.write_json(&folder.config(), spec)
+}
+
+pub(super) fn resume_setup(
+    request: &TrainRequest,
+    folder: &ModelFolder,
+    hierarchy_config: HierarchyConfig,
+) -> Result<(ModelSpec, Hierarchy, MeshData)> {
+    let mut spec = folder.read_spec()?;
+    refuse_finished_without_checkpoint(folder, spec.train.epochs)?;
+    let template = mesh_io::read_mesh(&folder.template())?.value;
+    spec.check_set(request.set, &template, &folder.dir)?;
+    let mut differences = Vec::new();
+    if spec.model != request.model {
+        differences.push("model");
+    }
+    if spec.features != request.features {
+        differences.push("features");
+    }
+    if spec.hierarchy != hierarchy_config {
+        differences.push("hierarchy");
+    }
+    if spec.names != request.set.names() {
+        differences.push("mesh names");
+    }
+    if spec.labels.is_some() && spec.labels.as_deref() != request.set.labels() {
+        differences.push("mesh labels");
+    }
+    let (a, b) = (&spec.train, &request.train);
+    if (
+        a.batch,
+        a.lr,
+        a.seed,
+        a.loss,
+        a.test_fraction,
+        a.val_fraction,
+        a.split_by_shape,
+    ) != (
+        b.batch,
+        b.lr,
+        b.seed,
+        b.loss,
+        b.test_fraction,
+        b.val_fraction,
+        b.split_by_shape,
+    ) {
+        differences.push("training settings other than epochs");
+    }
+    if !differences.is_empty() {
+        return Err(VaeError::model(
+            &folder.dir,
+            format!(
+                "cannot resume: the {} differ from this model's (only --epochs may change)",
+                differences.join(", ")
+            ),
+        ));
+    }
+    if spec.train.epochs != request.train.epochs {
+        spec.train.epochs = request.train.epochs;
+        folder.write_json(&folder.config(), &spec)?;
+    }
+    let hierarchy = Hierarchy::load(&folder.hierarchy())?;
+    let normalization = folder.read_json(&folder.normalization())?;
+    let split_file: SplitFile = folder.read_json(&folder.split())?;
+    let split = split_file.split();
+    split.check(request.set.len())?;
+    let features = deform_features::extract_features(request.set, spec.features)?;
+    let mut data =
+        MeshData::with_normalization(features.features, split, normalization, features.warnings);
+    if let Some(labels) = &spec.labels {
+        data = data.with_labels(labels.clone())?;
+    }
+    Ok((spec, hierarchy, data))
+}
+
+/// A run interrupted before its first checkpoint restarts from scratch on `--resume`, losing at
+/// most `checkpoint_seconds` of work. A *finished* run without its checkpoint (deleted by hand,
+/// or by `cargo xtask reproduce`, which keeps only the weights of the runs it has finished)
+/// would lose everything, its trained weights overwritten by a fresh run: that is refused.
+fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Result<()> {
+    let log = folder.log();
+    if folder.checkpoint().is_file() || !log.is_file() {
+        return Ok(());
+    }
+    let text = std::fs::read_to_string(&log).map_err(|e| VaeError::io(&log, e))?;
+    let logged = text
+        .lines()
+        .filter_map(|line| serde_json::from_str::<EpochRecord>(line).ok())
+        .map(|r| r.epoch)
+        .max()
+        .unwrap_or(0);
+    if logged > 0 && logged >= epochs {
+        return Err(VaeError::model(
+            &folder.dir,
+            format!(
+                "cannot resume: its run finished ({logged} epochs logged) but {}, which --resume \
+                 continues from, is gone (`cargo xtask reproduce` removes it from the runs it \
+                 has finished); the trained weights are untouched. To train longer, start a \
+                 new folder (or this one with --force) with the larger --epochs",
+                folder.checkpoint().display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Creates `out`, refusing to overwrite a model (or any non-empty folder) unless `force`.
+fn prepare_out_dir(folder: &ModelFolder, force: bool) -> Result<()> {
+    let dir = &folder.dir;
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(VaeError::model(dir, "exists and is not a folder"));
+        }
+        let non_empty = std::fs::read_dir(dir)
+            .map_err(|e| VaeError::io(dir, e))?
+            .next()
+            .is_some();
+        if non_empty && !force {
+            let what = if folder.has_model() {
+                "already holds a model; pass --resume to continue it or --force to replace it"
+            } else {
+                "is not empty; choose a new folder or pass --force"
+            };
+            return Err(VaeError::model(dir, what));
+        }
+        if force {
+            for path in [
+                folder.config(),
+                folder.checkpoint(),
+                folder.weights(),
+                folder.weights_selected_on_test(),
+                folder.log(),
+                folder.hierarchy(),
+                folder.normalization(),
+                folder.split(),
+                folder.template(),
+            ] {
+                if path.exists() {
+                    std::fs::remove_file(&path).map_err(|e| VaeError::io(&path, e))?;
+                }
+            }
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| VaeError::io(dir, e))
+}
