@@ -8,6 +8,9 @@ use super::stats::{Stat, sig, thousands};
 use super::{LoadedSet, Outcome};
 use std::fmt::Write;
 
+mod header;
+mod seeds;
+
 /// Opens the block of results.md that a regeneration keeps.
 pub const BEGIN_HAND_WRITTEN: &str = "<!-- BEGIN hand-written: kept by cargo xtask reproduce -->";
 /// Closes it.
@@ -77,12 +80,13 @@ pub fn markdown(outcome: &Outcome, kept: Option<&str>) -> String {
         "The tables of Yuan et al. 2020 (*Mesh Variational Autoencoders with Edge Contraction \
          Pooling*) reproduced on our data sets, with the paper's numbers beside ours.\n\n",
     );
-    header(&mut md, outcome);
+    header::header(&mut md, outcome);
     for set in &outcome.sets {
         ablation(&mut md, outcome, set);
     }
     paper_layout(&mut md, outcome);
     ordering(&mut md, outcome);
+    seeds::seed_by_seed(&mut md, outcome);
     improvements(&mut md, outcome);
     structures(&mut md, outcome);
     frameworks(&mut md, outcome);
@@ -98,102 +102,6 @@ pub fn markdown(outcome: &Outcome, kept: Option<&str>) -> String {
         }
     }
     md
-}
-
-fn header(md: &mut String, o: &Outcome) {
-    let opts = &o.options;
-    let seeds: Vec<String> = (1..=opts.seeds).map(|s| s.to_string()).collect();
-    let compute: f64 = o
-        .results
-        .iter()
-        .map(|r| r.train_seconds + r.other_seconds)
-        .sum();
-    let training: f64 = o.results.iter().map(|r| r.train_seconds).sum();
-    let _ = writeln!(md, "## How these numbers were made\n");
-    let _ = writeln!(md, "- Command: `{}`", opts.command);
-    for set in &o.sets {
-        let _ = writeln!(
-            md,
-            "- Data set {}: {} meshes of {} vertices and {} faces, bounding-box diagonal {} \
-             (of its first mesh), from {}.",
-            set.dataset.name,
-            set.set.len(),
-            thousands(set.set.vertex_count()),
-            thousands(set.set.faces().len()),
-            sig(set.diagonal),
-            set.description
-        );
-    }
-    let split = if opts.by_shape {
-        "by shape: meshes with the same vertex positions (horse-gallop stores its 24-frame \
-         cycle twice) are one shape and always land on the same side, so every test shape is \
-         unseen; ⌊G/2⌋ of the G shapes train, always including mesh 0's, the rest pose every \
-         mesh's features are computed against; a set without repeats splits as mesh by mesh"
-    } else {
-        "mesh by mesh, as the paper's random halves (⌊N/2⌋ training meshes, always including \
-         mesh 0, the rest pose every mesh's features are computed against): where a set holds \
-         a shape twice, a test mesh may have its copy in training"
-    };
-    let _ = writeln!(
-        md,
-        "- Seeds {}: each seed draws one random split into halves, {split}; the split is used \
-         by every network of that seed, and the seed also draws the initial weights and the \
-         training's shuffles and noise.",
-        seeds.join(", ")
-    );
-    let _ = writeln!(
-        md,
-        "- {} epochs per run (the authors' code runs 8000), batch 50, Adam with learning rate \
-         1e-3, the paper's network and loss as the authors' code runs them \
-         (`meshvae::ModelConfig::default()`, `TrainConfig::default()`), de-pooling by copy.",
-        opts.epochs
-    );
-    let _ = writeln!(md, "- Protocol: {}.", opts.protocol.description);
-    let _ = writeln!(
-        md,
-        "- Machine: {} cores (`nproc`), {}. Wall time of this invocation {:.1} min; the runs' \
-         own time summed (earlier invocations included) {:.1} min, of which training {:.1} min.",
-        o.machine.cores,
-        o.machine.cpu,
-        o.wall_seconds / 60.0,
-        compute / 60.0,
-        training / 60.0
-    );
-    let mut threads: Vec<usize> = o.results.iter().filter_map(|r| r.threads).collect();
-    threads.sort_unstable();
-    threads.dedup();
-    if !threads.is_empty() {
-        let list: Vec<String> = threads.iter().map(|t| t.to_string()).collect();
-        let _ = writeln!(
-            md,
-            "- Threads per run: {} (`--jobs` trains several runs at once, each on its share of \
-             the cores, so their summed time can exceed the wall time; the numbers do not \
-             depend on it).",
-            list.join(", ")
-        );
-    }
-    if let Some(records) = &opts.records {
-        let _ = writeln!(
-            md,
-            "- Every run's numbers: `{}/<data set>/{}/e{}{}/seed<N>/<column>.result.json`.",
-            records.display(),
-            opts.protocol.id,
-            opts.epochs,
-            if opts.by_shape { "" } else { "-by-mesh" }
-        );
-    }
-    for note in &o.notes {
-        let _ = writeln!(md, "- {note}");
-    }
-    md.push_str(
-        "\nMeasures, on the test meshes: **RMS** = sqrt(Σ‖v − v̂‖² / (3·N·V)) after aligning \
-         centroids, in mesh units; **rel** = RMS / the bounding-box diagonal; **mean dist** = \
-         mean per-vertex Euclidean distance (the measure of the authors' `show_error.m`, \
-         without its rigid alignment). The paper calls its numbers RMS errors, but they are most \
-         likely `show_error.m`'s mean distances (`../shared/notes/authors-code.md` §6), so the \
-         paper's figures stand beside our mean dist. Every number is mean ± sample standard \
-         deviation over the seeds. \"ours against it\" = (ours − it) / it on RMS.\n\n",
-    );
 }
 
 fn columns_of(group: Group) -> impl Iterator<Item = &'static Column> {
@@ -600,124 +508,4 @@ fn parameters(md: &mut String, o: &Outcome) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::reproduce::plan::{self, PROTOCOLS};
-    use crate::reproduce::{LoadedSet, Machine, Options, synthetic_config};
-    use meshvae::ModelConfig;
-
-    fn result(column: &str, seed: u64, rms: f64) -> RunResult {
-        RunResult {
-            dataset: "synthetic".into(),
-            protocol: PROTOCOLS[0].id.into(),
-            column: column.into(),
-            seed,
-            epochs: 5,
-            model: ModelConfig::default(),
-            levels: vec![258, 129],
-            test_meshes: 8,
-            train_meshes: 8,
-            test_rms: rms,
-            test_rms_rel: rms / 5.0,
-            test_mean_distance: 1.5 * rms,
-            train_rms: rms,
-            mean_shape_rms: 0.5,
-            params: 1000,
-            params_without_biases: 900,
-            best_epoch: 5,
-            val_meshes: 1,
-            split_by_shape: true,
-            selected_on: "validation".into(),
-            test_rms_selected_on_test: Some(rms * 0.99),
-            best_epoch_on_test: Some(4),
-            train_seconds: 1.0,
-            other_seconds: 1.0,
-            threads: None,
-        }
-    }
-
-    fn outcome(results: Vec<RunResult>) -> Outcome {
-        let dataset = plan::dataset("synthetic").unwrap();
-        let set = mesh_io::synth::generate(&synthetic_config(true))
-            .unwrap()
-            .set;
-        Outcome {
-            options: Options {
-                datasets: vec![dataset],
-                epochs: 5,
-                seeds: 2,
-                quick: true,
-                protocol: &PROTOCOLS[0],
-                by_shape: true,
-                work: "w".into(),
-                records: None,
-                jobs: 1,
-                results: "r.md".into(),
-                command: "cargo xtask reproduce --quick".into(),
-                progress: false,
-                report_only: false,
-            },
-            sets: vec![LoadedSet {
-                dataset,
-                set,
-                source: None,
-                diagonal: 5.0,
-                description: "test".into(),
-            }],
-            results,
-            reused: 0,
-            machine: Machine {
-                cores: 2,
-                cpu: "test CPU".into(),
-            },
-            wall_seconds: 60.0,
-            notes: vec![],
-        }
-    }
-
-    #[test]
-    fn tables_show_mean_std_and_the_relative_change() {
-        // Ours 0.9 ± 0.1 over two seeds; every other column 1.0 ± 0.1: ours is 10 % lower.
-        let mut results = Vec::new();
-        for c in COLUMNS {
-            let base = if c.is_ours() { 0.9 } else { 1.0 };
-            results.push(result(c.id, 1, base - 0.1 / 2f64.sqrt()));
-            results.push(result(c.id, 2, base + 0.1 / 2f64.sqrt()));
-        }
-        let md = markdown(&outcome(results.clone()), Some("KEPT"));
-        assert!(
-            md.contains("| **ours** (modified QEM, mean pooling) | 0.9000 ± 0.1000 |"),
-            "{md}"
-        );
-        assert!(md.contains("| Only Spectral Conv. (no pooling) | -8.36 % | -6.92 % | -10.00 % |"));
-        assert!(md.contains("ours has the lowest test RMS"));
-        // Every column ties except ours: ours first, and the paper also puts ours first.
-        let line = md
-            .lines()
-            .find(|l| l.starts_with("- synthetic: Our Method <"))
-            .unwrap_or_else(|| panic!("{md}"));
-        assert!(line.contains("of 21 pairs"), "{line}");
-        assert!(md.contains("- Paper: Our Method < "), "{md}");
-        assert!(md.contains("## Hand-written notes\n\nKEPT"));
-        assert!(md.contains("Machine: 2 cores (`nproc`), test CPU"));
-
-        // Max pooling below ours by less than the spread: named, "within one standard deviation".
-        for r in results.iter_mut().filter(|r| r.column == "max") {
-            r.test_rms -= 0.15;
-        }
-        let md = markdown(&outcome(results), None);
-        assert!(md.contains("ours is **not** the lowest: modified QEM, max pooling (0.8500"));
-        assert!(md.contains("within one standard deviation"));
-        assert!(md.contains(BEGIN_HAND_WRITTEN) && md.contains(END_HAND_WRITTEN));
-    }
-
-    #[test]
-    fn the_hand_written_block_is_found_with_its_markers() {
-        let text = format!("# R\n\ntables\n\n{BEGIN_HAND_WRITTEN}\nkeep me\n{END_HAND_WRITTEN}\n");
-        let block = hand_written(&text).unwrap();
-        assert!(block.starts_with(BEGIN_HAND_WRITTEN) && block.ends_with(END_HAND_WRITTEN));
-        assert!(block.contains("keep me"));
-        assert!(hand_written("no markers").is_none());
-        assert!(hand_written(BEGIN_HAND_WRITTEN).is_none());
-    }
-}
+mod tests;

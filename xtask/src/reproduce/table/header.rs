@@ -1,0 +1,131 @@
+//! The "How these numbers were made" section: command, data sets, split, training, protocol,
+//! machine and time.
+
+use crate::reproduce::Outcome;
+use crate::reproduce::stats::{sig, thousands};
+use std::fmt::Write;
+
+pub(super) fn header(md: &mut String, o: &Outcome) {
+    let opts = &o.options;
+    let seeds: Vec<String> = (1..=opts.seeds).map(|s| s.to_string()).collect();
+    let compute: f64 = o
+        .results
+        .iter()
+        .map(|r| r.train_seconds + r.other_seconds)
+        .sum();
+    let training: f64 = o.results.iter().map(|r| r.train_seconds).sum();
+    let _ = writeln!(md, "## How these numbers were made\n");
+    let _ = writeln!(md, "- Command: `{}`", opts.command);
+    for set in &o.sets {
+        let _ = writeln!(
+            md,
+            "- Data set {}: {} meshes of {} vertices and {} faces, bounding-box diagonal {} \
+             (of its first mesh), from {}.",
+            set.dataset.name,
+            set.set.len(),
+            thousands(set.set.vertex_count()),
+            thousands(set.set.faces().len()),
+            sig(set.diagonal),
+            set.description
+        );
+    }
+    let split = if opts.by_shape {
+        "by shape: meshes with the same vertex positions (horse-gallop stores its 24-frame \
+         cycle twice) are one shape and always land on the same side, so every test shape is \
+         unseen; ⌊G/2⌋ of the G shapes train, always including mesh 0's, the rest pose every \
+         mesh's features are computed against; a set without repeats splits as mesh by mesh"
+    } else {
+        "mesh by mesh, as the paper's random halves (⌊N/2⌋ training meshes, always including \
+         mesh 0, the rest pose every mesh's features are computed against): where a set holds \
+         a shape twice, a test mesh may have its copy in training"
+    };
+    let _ = writeln!(
+        md,
+        "- Seeds {}: each seed draws one random split into halves, {split}; the split is used \
+         by every network of that seed, and the seed also draws the initial weights and the \
+         training's shuffles and noise.",
+        seeds.join(", ")
+    );
+    let _ = writeln!(
+        md,
+        "- {} epochs per run (the authors' code runs 8000), batch 50, Adam with learning rate \
+         1e-3, the paper's network and loss as the authors' code runs them \
+         (`meshvae::ModelConfig::default()`, `TrainConfig::default()`), de-pooling by copy.",
+        opts.epochs
+    );
+    let _ = writeln!(md, "- Protocol: {}.", opts.protocol.description);
+    let _ = writeln!(
+        md,
+        "- Machine: {} cores (`nproc`), {} (this invocation's: a result file does not record \
+         the machine of its run). Wall time of this invocation {:.1} min{}; the runs' own time \
+         summed (earlier invocations included) {:.1} min, of which training {:.1} min{}.",
+        o.machine.cores,
+        o.machine.cpu,
+        o.wall_seconds / 60.0,
+        if o.reused == o.results.len() && !o.results.is_empty() {
+            " (it trained nothing: every run was read from its result file)"
+        } else {
+            ""
+        },
+        compute / 60.0,
+        training / 60.0,
+        per_set_time(o)
+    );
+    let mut threads: Vec<usize> = o.results.iter().filter_map(|r| r.threads).collect();
+    threads.sort_unstable();
+    threads.dedup();
+    if !threads.is_empty() {
+        let list: Vec<String> = threads.iter().map(|t| t.to_string()).collect();
+        let _ = writeln!(
+            md,
+            "- Threads per run: {} (`--jobs` trains several runs at once, each on its share of \
+             the cores, so their summed time can exceed the wall time; the numbers do not \
+             depend on it).",
+            list.join(", ")
+        );
+    }
+    if let Some(records) = &opts.records {
+        let _ = writeln!(
+            md,
+            "- Every run's numbers: `{}/<data set>/{}/e{}{}/seed<N>/<column>.result.json`.",
+            records.display(),
+            opts.protocol.id,
+            opts.epochs,
+            if opts.by_shape { "" } else { "-by-mesh" }
+        );
+    }
+    for note in &o.notes {
+        let _ = writeln!(md, "- {note}");
+    }
+    md.push_str(
+        "\nMeasures, on the test meshes: **RMS** = sqrt(Σ‖v − v̂‖² / (3·N·V)) after aligning \
+         centroids, in mesh units; **rel** = RMS / the bounding-box diagonal; **mean dist** = \
+         mean per-vertex Euclidean distance (the measure of the authors' `show_error.m`, \
+         without its rigid alignment). The paper calls its numbers RMS errors, but they are most \
+         likely `show_error.m`'s mean distances (`../shared/notes/authors-code.md` §6), so the \
+         paper's figures stand beside our mean dist. Every number is mean ± sample standard \
+         deviation over the seeds. \"ours against it\" = (ours − it) / it on RMS.\n\n",
+    );
+}
+
+/// "; horse-gallop 139.3 min, samba 643.1 min" where more than one data set ran.
+fn per_set_time(o: &Outcome) -> String {
+    if o.sets.len() < 2 {
+        return String::new();
+    }
+    let parts: Vec<String> = o
+        .sets
+        .iter()
+        .map(|set| {
+            let name = set.dataset.name;
+            let seconds: f64 = o
+                .results
+                .iter()
+                .filter(|r| r.dataset == name)
+                .map(|r| r.train_seconds + r.other_seconds)
+                .sum();
+            format!("{name} {:.1} min", seconds / 60.0)
+        })
+        .collect();
+    format!("; {}", parts.join(", "))
+}

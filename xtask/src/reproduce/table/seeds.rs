@@ -1,0 +1,128 @@
+//! The "Seed by seed" section: every run's test RMS, its rank among the ablation columns of its
+//! seed, and on how many seeds ours is below each column. Means over three seeds hide whether a
+//! column wins everywhere by a little or on one seed by a lot; the paper's claims are about the
+//! former.
+
+use super::columns_of;
+use crate::reproduce::Outcome;
+use crate::reproduce::plan::{COLUMNS, Group, OURS};
+use crate::reproduce::run::RunResult;
+use crate::reproduce::stats::sig;
+use std::fmt::Write;
+
+/// The section, for every data set with at least one finished run.
+pub(super) fn seed_by_seed(md: &mut String, o: &Outcome) {
+    let mut wrote_heading = false;
+    for set in &o.sets {
+        let name = set.dataset.name;
+        let runs: Vec<&RunResult> = o.results.iter().filter(|r| r.dataset == name).collect();
+        if runs.is_empty() {
+            continue;
+        }
+        if !wrote_heading {
+            md.push_str(
+                "## Seed by seed\n\nTest RMS of every run; the rank is among the ablation \
+                 columns of that seed (1 = lowest, in bold), and \"ours below it\" counts the \
+                 seeds on which ours has the lower test RMS.\n\n",
+            );
+            wrote_heading = true;
+        }
+        table(md, name, &runs);
+    }
+}
+
+fn table(md: &mut String, dataset: &str, runs: &[&RunResult]) {
+    let mut seeds: Vec<u64> = runs.iter().map(|r| r.seed).collect();
+    seeds.sort_unstable();
+    seeds.dedup();
+    let find = |column: &str, seed: u64| {
+        runs.iter()
+            .find(|r| r.column == column && r.seed == seed)
+            .map(|r| r.test_rms)
+    };
+    // Rank of each ablation column on each seed (1 = lowest), among the columns that finished.
+    let rank = |column: &str, seed: u64| -> Option<usize> {
+        let mine = find(column, seed)?;
+        let lower = columns_of(Group::Ablation)
+            .filter_map(|c| find(c.id, seed))
+            .filter(|&x| x < mine)
+            .count();
+        Some(lower + 1)
+    };
+
+    let _ = writeln!(md, "### {dataset}\n");
+    md.push_str("| network |");
+    for s in &seeds {
+        let _ = write!(md, " seed {s} |");
+    }
+    md.push_str(" ranks | ours below it |\n|---|");
+    md.push_str(&"---:|".repeat(seeds.len()));
+    md.push_str("---|---|\n");
+
+    for column in COLUMNS {
+        if !seeds.iter().any(|&s| find(column.id, s).is_some()) {
+            continue;
+        }
+        let ablation = column.group == Group::Ablation;
+        let _ = write!(md, "| {} |", column.label);
+        for &s in &seeds {
+            let cell = match find(column.id, s) {
+                None => "—".to_string(),
+                Some(x) if ablation && rank(column.id, s) == Some(1) => format!("**{}**", sig(x)),
+                Some(x) => sig(x),
+            };
+            let _ = write!(md, " {cell} |");
+        }
+        let ranks = if ablation {
+            seeds
+                .iter()
+                .map(|&s| rank(column.id, s).map_or("—".into(), |r| r.to_string()))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        } else {
+            String::new()
+        };
+        let below = if column.is_ours() {
+            "—".to_string()
+        } else {
+            let both: Vec<(f64, f64)> = seeds
+                .iter()
+                .filter_map(|&s| Some((find(OURS, s)?, find(column.id, s)?)))
+                .collect();
+            if both.is_empty() {
+                String::new()
+            } else {
+                let wins = both.iter().filter(|(ours, it)| ours < it).count();
+                format!("{wins} of {}", both.len())
+            }
+        };
+        let _ = writeln!(md, " {ranks} | {below} |");
+    }
+
+    md.push_str("| mean training shape (trivial predictor) |");
+    for &s in &seeds {
+        let cell = runs
+            .iter()
+            .find(|r| r.seed == s)
+            .map_or("—".into(), |r| sig(r.mean_shape_rms));
+        let _ = write!(md, " {cell} |");
+    }
+    md.push_str(" | |\n\n");
+
+    // Under the validation protocol: how often the two losses choose the same weights.
+    let compared: Vec<&&RunResult> = runs
+        .iter()
+        .filter(|r| r.best_epoch_on_test.is_some())
+        .collect();
+    if !compared.is_empty() {
+        let same = compared
+            .iter()
+            .filter(|r| r.best_epoch_on_test == Some(r.best_epoch))
+            .count();
+        let _ = writeln!(
+            md,
+            "The validation loss and the test loss chose the same epoch in {same} of {} runs.\n",
+            compared.len()
+        );
+    }
+}

@@ -1,0 +1,169 @@
+use super::*;
+use crate::reproduce::plan::{self, PROTOCOLS};
+use crate::reproduce::{LoadedSet, Machine, Options, synthetic_config};
+use meshvae::ModelConfig;
+
+fn result(column: &str, seed: u64, rms: f64) -> RunResult {
+    RunResult {
+        dataset: "synthetic".into(),
+        protocol: PROTOCOLS[0].id.into(),
+        column: column.into(),
+        seed,
+        epochs: 5,
+        model: ModelConfig::default(),
+        levels: vec![258, 129],
+        test_meshes: 8,
+        train_meshes: 8,
+        test_rms: rms,
+        test_rms_rel: rms / 5.0,
+        test_mean_distance: 1.5 * rms,
+        train_rms: rms,
+        mean_shape_rms: 0.5,
+        params: 1000,
+        params_without_biases: 900,
+        best_epoch: 5,
+        val_meshes: 1,
+        split_by_shape: true,
+        selected_on: "validation".into(),
+        test_rms_selected_on_test: Some(rms * 0.99),
+        best_epoch_on_test: Some(4),
+        train_seconds: 1.0,
+        other_seconds: 1.0,
+        threads: None,
+    }
+}
+
+fn outcome(results: Vec<RunResult>) -> Outcome {
+    let dataset = plan::dataset("synthetic").unwrap();
+    let set = mesh_io::synth::generate(&synthetic_config(true))
+        .unwrap()
+        .set;
+    Outcome {
+        options: Options {
+            datasets: vec![dataset],
+            epochs: 5,
+            seeds: 2,
+            quick: true,
+            protocol: &PROTOCOLS[0],
+            by_shape: true,
+            work: "w".into(),
+            records: None,
+            jobs: 1,
+            results: "r.md".into(),
+            command: "cargo xtask reproduce --quick".into(),
+            progress: false,
+            report_only: false,
+        },
+        sets: vec![LoadedSet {
+            dataset,
+            set,
+            source: None,
+            diagonal: 5.0,
+            description: "test".into(),
+        }],
+        results,
+        reused: 0,
+        machine: Machine {
+            cores: 2,
+            cpu: "test CPU".into(),
+        },
+        wall_seconds: 60.0,
+        notes: vec![],
+    }
+}
+
+#[test]
+fn tables_show_mean_std_and_the_relative_change() {
+    // Ours 0.9 ± 0.1 over two seeds; every other column 1.0 ± 0.1: ours is 10 % lower.
+    let mut results = Vec::new();
+    for c in COLUMNS {
+        let base = if c.is_ours() { 0.9 } else { 1.0 };
+        results.push(result(c.id, 1, base - 0.1 / 2f64.sqrt()));
+        results.push(result(c.id, 2, base + 0.1 / 2f64.sqrt()));
+    }
+    let md = markdown(&outcome(results.clone()), Some("KEPT"));
+    assert!(
+        md.contains("| **ours** (modified QEM, mean pooling) | 0.9000 ± 0.1000 |"),
+        "{md}"
+    );
+    assert!(md.contains("| Only Spectral Conv. (no pooling) | -8.36 % | -6.92 % | -10.00 % |"));
+    assert!(md.contains("ours has the lowest test RMS"));
+    // Every column ties except ours: ours first, and the paper also puts ours first.
+    let line = md
+        .lines()
+        .find(|l| l.starts_with("- synthetic: Our Method <"))
+        .unwrap_or_else(|| panic!("{md}"));
+    assert!(line.contains("of 21 pairs"), "{line}");
+    assert!(md.contains("- Paper: Our Method < "), "{md}");
+    assert!(md.contains("## Hand-written notes\n\nKEPT"));
+    assert!(md.contains("Machine: 2 cores (`nproc`), test CPU"));
+
+    // Max pooling below ours by less than the spread: named, "within one standard deviation".
+    for r in results.iter_mut().filter(|r| r.column == "max") {
+        r.test_rms -= 0.15;
+    }
+    let md = markdown(&outcome(results), None);
+    assert!(md.contains("ours is **not** the lowest: modified QEM, max pooling (0.8500"));
+    assert!(md.contains("within one standard deviation"));
+    assert!(md.contains(BEGIN_HAND_WRITTEN) && md.contains(END_HAND_WRITTEN));
+}
+
+#[test]
+fn the_hand_written_block_is_found_with_its_markers() {
+    let text = format!("# R\n\ntables\n\n{BEGIN_HAND_WRITTEN}\nkeep me\n{END_HAND_WRITTEN}\n");
+    let block = hand_written(&text).unwrap();
+    assert!(block.starts_with(BEGIN_HAND_WRITTEN) && block.ends_with(END_HAND_WRITTEN));
+    assert!(block.contains("keep me"));
+    assert!(hand_written("no markers").is_none());
+    assert!(hand_written(BEGIN_HAND_WRITTEN).is_none());
+}
+
+#[test]
+fn seed_by_seed_ranks_each_seed_and_counts_where_ours_is_below() {
+    // Seed 1: ours lowest of everything. Seed 2: every column but ours at 1.0, ours 1.1, and
+    // max pooling lowest at 0.5. The test loss picks another epoch on seed 2 only.
+    let mut results = Vec::new();
+    for c in COLUMNS {
+        let mut r = result(c.id, 1, if c.is_ours() { 0.5 } else { 1.0 });
+        r.best_epoch_on_test = Some(r.best_epoch);
+        results.push(r);
+        let rms = match c.id {
+            "ours" => 1.1,
+            "max" => 0.5,
+            _ => 1.0,
+        };
+        let mut r = result(c.id, 2, rms);
+        r.best_epoch_on_test = Some(3);
+        results.push(r);
+    }
+    let md = markdown(&outcome(results), None);
+    assert!(md.contains("## Seed by seed"), "{md}");
+    assert!(
+        md.contains("| network | seed 1 | seed 2 | ranks | ours below it |"),
+        "{md}"
+    );
+    let section = &md[md.find("## Seed by seed").unwrap()..];
+    let row = |label: &str| {
+        section
+            .lines()
+            .find(|l| l.starts_with(&format!("| {label} |")))
+            .unwrap_or_else(|| panic!("no row {label} in {section}"))
+            .to_string()
+    };
+    let ours = row("**ours** (modified QEM, mean pooling)");
+    assert!(
+        ours.contains("| **0.5000** | 1.100 | 1 / 8 | — |"),
+        "{ours}"
+    );
+    let max = row("modified QEM, max pooling");
+    assert!(
+        max.contains("| 1.000 | **0.5000** | 2 / 1 | 1 of 2 |"),
+        "{max}"
+    );
+    // Ties rank alike: on seed 1 the six other columns share rank 2.
+    let qem = row("classical QEM, mean pooling");
+    assert!(qem.contains("| 2 / 2 | 1 of 2 |"), "{qem}");
+    // Structure rows carry no rank.
+    assert!(row("`CPCPC` (ours, two poolings)").ends_with("| 1.000 | 1.000 |  | 1 of 2 |"));
+    assert!(md.contains("chose the same epoch in 10 of 20 runs"), "{md}");
+}
