@@ -100,6 +100,7 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         "## How these numbers were made",
         "## In the paper's layout",
         "## Ordering of the columns",
+        "## Seed by seed",
         "## Relative improvements of ours",
         "## Network structures",
         "## Parameters",

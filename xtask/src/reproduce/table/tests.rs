@@ -167,3 +167,31 @@ fn seed_by_seed_ranks_each_seed_and_counts_where_ours_is_below() {
     assert!(row("`CPCPC` (ours, two poolings)").ends_with("| 1.000 | 1.000 |  | 1 of 2 |"));
     assert!(md.contains("chose the same epoch in 10 of 20 runs"), "{md}");
 }
+
+#[test]
+fn the_header_says_a_report_only_page_trained_nothing_and_gives_each_sets_time() {
+    let mut o = outcome(vec![result("ours", 1, 0.5)]);
+    let md = markdown(&o, None);
+    assert!(!md.contains("it trained nothing"), "{md}");
+    // One data set: no per-set split of the time.
+    assert!(!md.contains("; synthetic 0.0 min"), "{md}");
+
+    let samba = plan::dataset("samba").unwrap();
+    let set = LoadedSet {
+        dataset: samba,
+        set: o.sets[0].set.clone(),
+        source: None,
+        diagonal: 5.0,
+        description: "test".into(),
+    };
+    o.sets.push(set);
+    let mut r = result("ours", 1, 0.5);
+    r.dataset = "samba".into();
+    r.train_seconds = 120.0;
+    o.results.push(r);
+    o.reused = o.results.len();
+    let md = markdown(&o, None);
+    assert!(md.contains("(it trained nothing: every run was read from its result file)"));
+    // synthetic: 1 s + 1 s; samba: 120 s + 1 s.
+    assert!(md.contains("; synthetic 0.0 min, samba 2.0 min."), "{md}");
+}
