@@ -1,10 +1,11 @@
 //! # mesh-render: pictures of meshes and plots, as PNG, in pure Rust
 //!
 //! **In:** triangle meshes (positions + faces, optionally a colour per vertex, e.g. from
-//! [`error_colors`]), 2-D point series. **Out:** RGB [`Image`]s — shaded renders ([`render`]),
-//! captioned contact sheets ([`sheet`]), colour bars ([`with_colorbar`]), scatter plots
-//! ([`scatter`]), side-by-side panels ([`hstack`]) — written as PNG ([`Image::save_png`],
-//! atomically).
+//! [`error_colors`]), 2-D point series, curves over steps or epochs. **Out:** RGB [`Image`]s —
+//! shaded renders ([`render`]), captioned contact sheets ([`sheet`]), colour bars
+//! ([`with_colorbar`]), scatter plots ([`scatter`]), line plots of training curves with a log
+//! y axis and markers ([`line_plot`]), side-by-side panels ([`hstack`]) — written as PNG
+//! ([`Image::save_png`], atomically).
 //!
 //! [`render`] is a software rasterizer: orthographic camera from one of six [`View`]s, or by
 //! default `View::Auto` (along the box's thinnest axis, y up where possible: long shapes are seen
@@ -44,6 +45,7 @@ mod camera;
 pub mod colormap;
 mod error;
 mod image;
+mod lines;
 mod plot;
 mod raster;
 mod sheet;
@@ -53,6 +55,7 @@ pub use camera::{Bounds, MARGIN, View};
 pub use colormap::error_colors;
 pub use error::RenderError;
 pub use image::{Image, MAX_PIXELS, MAX_SIDE, hstack};
+pub use lines::{Curve, LinePlot, Marker, line_plot};
 pub use plot::{MIN_PLOT_SIZE, SERIES_COLORS, Series, scatter};
 pub use raster::{MAX_RENDER_PIXELS, NEUTRAL_GREY, RenderOptions, SUPERSAMPLING, render};
 pub use sheet::{Tile, caption_height, sheet, ticks, with_colorbar};

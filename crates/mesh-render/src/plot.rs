@@ -33,6 +33,12 @@ pub const SERIES_COLORS: [[u8; 3]; 10] = [
     [23, 190, 207],
 ];
 
+/// Axis lines, tick labels and axis descriptions of every plot.
+pub(crate) const AXIS_COLOR: RGBColor = RGBColor(60, 60, 66);
+/// Grid lines at labelled ticks, and the lighter ones between them.
+pub(crate) const GRID_BOLD: RGBColor = RGBColor(222, 224, 228);
+pub(crate) const GRID_LIGHT: RGBColor = RGBColor(242, 243, 245);
+
 /// Smallest plot accepted: below this the axes and labels do not fit.
 pub const MIN_PLOT_SIZE: u32 = 120;
 
@@ -47,15 +53,7 @@ pub fn scatter(
     width: u32,
     height: u32,
 ) -> Result<Image, RenderError> {
-    check_size("width/height", width, height)?;
-    if width < MIN_PLOT_SIZE || height < MIN_PLOT_SIZE {
-        return Err(RenderError::Size {
-            argument: "width/height",
-            width: width.into(),
-            height: height.into(),
-            message: format!("plots need at least {MIN_PLOT_SIZE} pixels per side"),
-        });
-    }
+    check_plot_size(width, height)?;
     if series.iter().all(|s| s.points.is_empty()) {
         return Err(RenderError::Empty { argument: "series" });
     }
@@ -89,7 +87,21 @@ pub fn scatter(
     Ok(Image { width, height, rgb })
 }
 
-type Range = std::ops::Range<f64>;
+/// The size checks of every plot: [`check_size`], and at least [`MIN_PLOT_SIZE`] per side.
+pub(crate) fn check_plot_size(width: u32, height: u32) -> Result<(), RenderError> {
+    check_size("width/height", width, height)?;
+    if width < MIN_PLOT_SIZE || height < MIN_PLOT_SIZE {
+        return Err(RenderError::Size {
+            argument: "width/height",
+            width: width.into(),
+            height: height.into(),
+            message: format!("plots need at least {MIN_PLOT_SIZE} pixels per side"),
+        });
+    }
+    Ok(())
+}
+
+pub(crate) type Range = std::ops::Range<f64>;
 
 /// The data ranges with 6% padding; a zero extent becomes ±0.5 (or ±10%) around the value.
 fn ranges(series: &[Series]) -> (Range, Range) {
@@ -101,19 +113,22 @@ fn ranges(series: &[Series]) -> (Range, Range) {
             hi[k] = hi[k].max(f64::from(p[k]));
         }
     }
-    let range = |k: usize| {
-        let extent = hi[k] - lo[k];
-        if extent > 0.0 {
-            lo[k] - 0.06 * extent..hi[k] + 0.06 * extent
-        } else {
-            let half = (0.1 * lo[k].abs()).max(0.5);
-            lo[k] - half..hi[k] + half
-        }
-    };
-    (range(0), range(1))
+    (padded(lo[0], hi[0], 0.06), padded(lo[1], hi[1], 0.06))
 }
 
-fn rgb(c: [u8; 3]) -> RGBColor {
+/// `lo..hi` widened by `fraction` of the extent on each side; a zero extent becomes ±0.5 (or
+/// ±10%) around the value.
+pub(crate) fn padded(lo: f64, hi: f64, fraction: f64) -> Range {
+    let extent = hi - lo;
+    if extent > 0.0 {
+        lo - fraction * extent..hi + fraction * extent
+    } else {
+        let half = (0.1 * lo.abs()).max(0.5);
+        lo - half..hi + half
+    }
+}
+
+pub(crate) fn rgb(c: [u8; 3]) -> RGBColor {
     RGBColor(c[0], c[1], c[2])
 }
 
@@ -150,7 +165,7 @@ fn draw(
         .x_label_area_size((tick_px + desc_px * 2.2) as u32)
         .y_label_area_size((tick_px * 4.0 + desc_px * 1.8) as u32)
         .build_cartesian_2d(x_range, y_range)?;
-    let axis = RGBColor(60, 60, 66);
+    let axis = AXIS_COLOR;
     chart
         .configure_mesh()
         .x_desc(x_label)
@@ -158,8 +173,8 @@ fn draw(
         .label_style((FAMILY, tick_px).into_font().color(&axis))
         .axis_desc_style((FAMILY, desc_px).into_font().color(&axis))
         .axis_style(axis)
-        .bold_line_style(RGBColor(222, 224, 228))
-        .light_line_style(RGBColor(242, 243, 245))
+        .bold_line_style(GRID_BOLD)
+        .light_line_style(GRID_LIGHT)
         .x_labels(6)
         .y_labels(6)
         .draw()?;

@@ -12,6 +12,7 @@ mod features;
 mod generate;
 mod info;
 mod interpolate;
+mod loss_plot;
 mod pack;
 mod render;
 mod simplify;

@@ -19,9 +19,26 @@ pub struct TrainArgs {
     /// The model folder to write (refused if it holds another model, unless --force/--resume).
     #[arg(long)]
     out: PathBuf,
-    /// Total epochs [default: 300]. With --resume, may be raised to train further.
-    #[arg(long)]
+    /// Budget in epochs (instead of the default step budget). Training still stops earlier
+    /// once the validation loss has converged, unless --patience 0. With --resume, may be
+    /// raised to train further.
+    #[arg(long, conflicts_with = "steps")]
     epochs: Option<usize>,
+    /// Budget in optimizer steps (rounded up to whole epochs) [default: 20000, which the sets
+    /// measured never reach: they converge first]. With --resume, may be raised.
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Stop (converged) after this many optimizer steps without a new best validation loss;
+    /// 0 trains the whole budget [default: 1500].
+    #[arg(long)]
+    patience: Option<usize>,
+    /// Halve the learning rate after this many steps without a new best (at most five times);
+    /// 0 keeps it constant [default: 400].
+    #[arg(long)]
+    lr_patience: Option<usize>,
+    /// Raise the learning rate linearly from a tenth over this many first steps [default: 0].
+    #[arg(long)]
+    warmup: Option<usize>,
     /// Seeds the split, the initial weights, the shuffles and the sampling [default: 1].
     #[arg(long)]
     seed: Option<u64>,
@@ -163,6 +180,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         .map(|s| s.train.clone())
         .unwrap_or(TrainConfig {
             epochs: 300,
+            steps: Some(meshvae::DEFAULT_MAX_STEPS),
             ..TrainConfig::default()
         });
     let base_hierarchy = stored.as_ref().map(|s| s.hierarchy).unwrap_or_default();
@@ -202,7 +220,23 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     };
     let conditional = model.labels.clone();
     let mut train = base_train.clone();
-    train.epochs = args.epochs.unwrap_or(base_train.epochs);
+    match (args.epochs, args.steps) {
+        (Some(epochs), _) => {
+            train.epochs = epochs;
+            train.steps = None;
+        }
+        (None, Some(steps)) => train.steps = Some(steps),
+        (None, None) => {}
+    }
+    if let Some(p) = args.patience {
+        train.schedule.patience = p;
+    }
+    if let Some(p) = args.lr_patience {
+        train.schedule.lr_patience = p;
+    }
+    if let Some(w) = args.warmup {
+        train.schedule.warmup_steps = w;
+    }
     train.seed = args.seed.unwrap_or(base_train.seed);
     train.batch = args.batch.unwrap_or(base_train.batch);
     train.lr = args.lr.unwrap_or(base_train.lr);
@@ -253,20 +287,44 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         ..TrainOptions::default()
     };
     let summary = meshvae::train(&request, &options, |_| {})?;
+    let done = summary
+        .last
+        .as_ref()
+        .map_or(0, |r| r.epoch)
+        .max(summary.best_epoch);
     println!(
-        "trained {} epoch(s) in {:.1} s ({} of {} done); best epoch {} ({} loss {:.4})",
+        "trained {} epoch(s) in {:.1} s ({} of at most {} epochs, {} steps, {:.0} s in all); best \
+         epoch {} ({} loss {:.4})",
         summary.epochs_run,
         summary.seconds,
-        summary
-            .last
-            .as_ref()
-            .map_or(0, |r| r.epoch)
-            .max(summary.best_epoch),
+        done,
         summary.epochs_total,
+        summary.steps,
+        summary.seconds_total,
         summary.best_epoch,
         summary.selected_on,
         summary.best_loss
     );
+    match summary.stop_reason {
+        meshvae::StopReason::Converged => println!(
+            "stopped: converged (no new best {} loss for {} steps; learning rate now {:.2e})",
+            summary.selected_on, request.train.schedule.patience, summary.lr
+        ),
+        _ if summary.still_improving => eprintln!(
+            "warning: stopped by the budget ({} steps) while the {} loss was still improving: \
+             the model has not finished learning. Continue it with `meshvae train {} --out {} \
+             --resume --steps N` and a larger N.",
+            summary.steps,
+            summary.selected_on,
+            args.set.display(),
+            args.out.display()
+        ),
+        _ => println!("stopped: budget (the loss had stopped improving)"),
+    }
+    match crate::loss_plot::write_loss_plot(&folder) {
+        Ok(path) => println!("loss curves: {}", path.display()),
+        Err(e) => eprintln!("warning: no loss.png: {e}"),
+    }
     if !conditional.is_empty() {
         println!("conditional on the labels {}", conditional.join(", "));
     }
@@ -282,9 +340,11 @@ pub struct EvalArgs {
     #[arg(long)]
     set: Option<PathBuf>,
     /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
-    /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance, params,
-    /// params_without_biases, epochs, best_epoch, selected_on, vertices, test_meshes,
-    /// val_meshes, train_meshes, split_by_shape).
+    /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance,
+    /// test_mean_distance_rigid, mean_shape_mean_distance_rigid, params,
+    /// params_without_biases, epochs, best_epoch, selected_on, stop_reason, steps,
+    /// still_improving, train_seconds, vertices, test_meshes, val_meshes, train_meshes,
+    /// split_by_shape, loss_plot).
     #[arg(long)]
     json: bool,
     /// Report the weights with the lowest TEST loss, as the authors' code chose its checkpoint
@@ -298,11 +358,25 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         model_and_set_selected(&args.model, args.set.as_ref(), args.select_on_test)?;
     let report = trained.evaluate(&set, &Device::Cpu)?;
     let epochs = trained.epochs_trained()?;
+    let folder = ModelFolder::new(&args.model);
+    let status = meshvae::read_status(&folder)?;
+    // Redrawn when missing or older than the log (a run killed before it drew one).
+    let loss_plot = crate::loss_plot::refresh_loss_plot(&folder)
+        .map_err(|e| eprintln!("warning: no loss.png: {e}"))
+        .ok();
+    // Models trained before run.json existed: a full log ran its budget.
+    let stop_reason = match &status {
+        Some(s) => s.stop_reason.as_str(),
+        None if epochs.0 >= trained.spec.train.epochs => "budget",
+        None => "interrupted",
+    };
     let value = serde_json::json!({
         "test_rms": report.test.rms,
         "test_rms_x1000": report.test.rms_x1000,
         "test_rms_rel": report.test.rms_rel,
         "test_mean_distance": report.test.mean_distance,
+        "test_mean_distance_rigid": report.test.mean_distance_rigid,
+        "mean_shape_mean_distance_rigid": report.mean_shape.mean_distance_rigid,
         "train_rms": report.train.rms,
         "train_rms_rel": report.train.rms_rel,
         "mean_shape_rms": report.mean_shape.rms,
@@ -312,6 +386,11 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "epochs": epochs.0,
         "best_epoch": epochs.1,
         "selected_on": trained.selected_on.as_str(),
+        "stop_reason": stop_reason,
+        "steps": status.as_ref().map(|s| s.steps),
+        "still_improving": status.as_ref().map(|s| s.still_improving),
+        "train_seconds": status.as_ref().map(|s| s.seconds),
+        "loss_plot": loss_plot.as_ref().map(|p| p.display().to_string()),
         "vertices": report.vertices,
         "test_meshes": report.test.meshes,
         "val_meshes": trained.split.val.len(),
@@ -344,6 +423,13 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         report.mean_shape.rms, report.mean_shape.rms_rel
     );
     println!(
+        "  mean dist.   {:.6} test, {:.6} mean shape (per-vertex, rigidly aligned as the authors' \
+         script; {:.6} test with centroids aligned only)",
+        report.test.mean_distance_rigid,
+        report.mean_shape.mean_distance_rigid,
+        report.test.mean_distance
+    );
+    println!(
         "  parameters   {} ({} without biases)",
         report.params.with_biases, report.params.without_biases
     );
@@ -354,6 +440,29 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         trained.selected_on,
         trained.split.val.len()
     );
+    match &status {
+        Some(s) => println!(
+            "  stopped      {}{} after {} steps, {:.0} s of training ({} path){}",
+            s.stop_reason,
+            if s.stop_reason == meshvae::StopReason::Budget && s.still_improving {
+                " WHILE STILL IMPROVING (not finished learning; continue with --resume)"
+            } else {
+                ""
+            },
+            s.steps,
+            s.seconds,
+            s.path,
+            if s.lr_cuts > 0 {
+                format!("; learning rate cut {} times, to {:.2e}", s.lr_cuts, s.lr)
+            } else {
+                String::new()
+            }
+        ),
+        None => println!("  stopped      {stop_reason} (a model trained before run.json)"),
+    }
+    if let Some(path) = &loss_plot {
+        println!("  loss curves  {}", path.display());
+    }
     println!(
         "  split        {}",
         if trained.spec.train.split_by_shape {

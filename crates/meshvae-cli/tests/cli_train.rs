@@ -27,8 +27,17 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         args.extend_from_slice(extra);
         meshvae(&args)
     };
-    let out = ok(&train(&[]));
-    assert!(out.contains("trained 2 epoch(s)"), "{out}");
+    let out = train(&[]);
+    assert!(out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stdout.contains("trained 2 epoch(s)"), "{stdout}");
+    assert!(stdout.contains("loss curves: "), "{stdout}");
+    // Two epochs are far from converged: the budget stopped a run that was still learning.
+    assert!(
+        stderr.contains("warning: stopped by the budget") && stderr.contains("--resume --steps"),
+        "{stderr}"
+    );
 
     // Another run into the same folder is refused; --resume continues, --force replaces.
     fails_with(&train(&[]), 1, "already holds a model");
@@ -39,6 +48,8 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     };
     let out = ok(&resume(&["--epochs", "3"]));
     assert!(out.contains("trained 1 epoch(s)"), "{out}");
+    fails_with(&resume(&["--steps", "0"]), 1, "steps");
+    fails_with(&resume(&["--epochs", "4", "--steps", "9"]), 2, "--steps");
     fails_with(&resume(&["--lr", "0.5"]), 1, "cannot resume");
     // The split is drawn by shape unless asked otherwise, and a model keeps its kind of split.
     let split = |dir: &std::path::Path| -> serde_json::Value {
@@ -78,10 +89,32 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         "selected_on",
         "val_meshes",
         "split_by_shape",
+        "stop_reason",
+        "steps",
+        "test_mean_distance_rigid",
+        "loss_plot",
     ] {
         assert!(v.get(key).is_some(), "eval --json lacks {key}: {json}");
     }
     assert_eq!(v["epochs"], 3);
+    // Three epochs of a falling loss: cut by the budget, still improving.
+    assert_eq!(v["stop_reason"], "budget");
+    assert_eq!(v["still_improving"], true);
+    assert!(
+        v["test_mean_distance_rigid"].as_f64().unwrap()
+            <= v["test_mean_distance"].as_f64().unwrap()
+    );
+    // loss.png: a picture of the three epochs' losses.
+    let png = model.join("loss.png");
+    assert_eq!(v["loss_plot"].as_str(), Some(s(&png)));
+    let plot = mesh_render::Image::decode_png(&std::fs::read(&png).unwrap()).unwrap();
+    assert_eq!((plot.width, plot.height), (1000, 600));
+    let text = ok(&meshvae(&["eval", s(&model)]));
+    assert!(
+        text.contains("stopped      budget WHILE STILL IMPROVING"),
+        "{text}"
+    );
+    assert!(text.contains("loss curves"), "{text}");
     // 8 meshes: 4 test, 4 training of which one validates and chooses the weights.
     assert_eq!(
         (v["selected_on"].as_str(), v["val_meshes"].as_u64()),

@@ -107,6 +107,15 @@ impl Adam {
         &self.config
     }
 
+    /// Changes the learning rate of the next steps (a schedule's); the moments are kept.
+    pub fn set_lr(&mut self, lr: f64) -> Result<()> {
+        if !(lr.is_finite() && lr > 0.0) {
+            return Err(VaeError::argument("lr", format!("{lr} is not positive")));
+        }
+        self.config.lr = lr;
+        Ok(())
+    }
+
     /// Steps taken so far.
     pub fn step_count(&self) -> u64 {
         self.step

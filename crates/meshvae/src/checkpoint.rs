@@ -1,12 +1,14 @@
 //! [`Checkpoint`]: the whole training state after an epoch, in one safetensors file, so that an
 //! interrupted run resumes exactly where the last finished epoch left it: the model's trainable
 //! and batch-norm tensors (`model.*`), Adam's moments and step (`adam.*`), and the epoch, random
-//! state and best validation and test losses so far (`meta.*`). One file, written atomically: a kill at any
+//! state, best validation and test losses so far, learning-rate schedule and training time
+//! (`meta.*`). One file, written atomically: a kill at any
 //! moment leaves either the previous checkpoint or the new one.
 
 use crate::adam::Adam;
 use crate::error::{Result, VaeError};
 use crate::model::MeshVae;
+use crate::schedule::ScheduleState;
 use candle_core::{DType, Device, Tensor};
 use std::collections::HashMap;
 use std::path::Path;
@@ -25,6 +27,11 @@ pub struct Progress {
     /// Lowest test loss so far and its epoch (for the weights selected on test).
     pub best_test_loss: f64,
     pub best_test_epoch: usize,
+    /// The learning-rate schedule's state (checkpoints written before schedules existed read
+    /// as a fresh state).
+    pub schedule: ScheduleState,
+    /// Seconds of training so far, over every resumed part (0 in older checkpoints).
+    pub seconds: f64,
 }
 
 pub struct Checkpoint;
@@ -62,6 +69,14 @@ impl Checkpoint {
             "meta.best_loss".into(),
             Tensor::new(&[progress.best_loss, progress.best_test_loss], &cpu)?,
         );
+        map.insert(
+            "meta.schedule".into(),
+            Tensor::new(progress.schedule.to_vec().as_slice(), &cpu)?,
+        );
+        map.insert(
+            "meta.seconds".into(),
+            Tensor::new(&[progress.seconds], &cpu)?,
+        );
         save_atomic(path, &map)
     }
 
@@ -95,6 +110,15 @@ impl Checkpoint {
         for (r, pair) in rng.iter_mut().zip(words.chunks_exact(2)) {
             *r = ((pair[0] as u64) << 32) | pair[1] as u64;
         }
+        let schedule = match map.get("meta.schedule") {
+            Some(t) => ScheduleState::from_slice(&t.to_dtype(DType::F64)?.to_vec1::<f64>()?)
+                .ok_or_else(|| VaeError::model(path, "malformed meta.schedule"))?,
+            None => ScheduleState::default(),
+        };
+        let seconds = match map.get("meta.seconds") {
+            Some(t) => t.to_dtype(DType::F64)?.to_vec1::<f64>()?.first().copied(),
+            None => None,
+        };
         Ok(Progress {
             epoch: epoch.max(0) as usize,
             rng,
@@ -102,6 +126,8 @@ impl Checkpoint {
             best_epoch: best_epoch.max(0) as usize,
             best_test_loss,
             best_test_epoch: best_test_epoch.max(0) as usize,
+            schedule,
+            seconds: seconds.unwrap_or(0.0),
         })
     }
 

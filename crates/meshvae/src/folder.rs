@@ -7,9 +7,11 @@
 //!   normalization.json   feature ranges fitted on the training split
 //!   split.json           training and test indices (and names)
 //!   template.obj         the rest mesh features are relative to
-//!   weights.safetensors  the best weights (lowest test loss)
-//!   checkpoint.safetensors  the last epoch: weights, optimiser, random state (for --resume)
-//!   log.jsonl            one line of losses per epoch
+//!   weights.safetensors  the best weights (lowest validation loss)
+//!   checkpoint.safetensors  the last epoch: weights, optimiser, random state, schedule
+//!   log.jsonl            one line of losses per epoch (with the step count and learning rate)
+//!   run.json             why training stopped: converged, budget or interrupted (RunStatus)
+//!   loss.png             the loss curves (written by `meshvae train`)
 //! ```
 //!
 //! Every file is written atomically (temporary file, then rename).
@@ -18,6 +20,7 @@ use crate::config::ModelConfig;
 use crate::error::{Result, VaeError};
 use crate::loss::LossWeights;
 use crate::model::MeshVae;
+use crate::schedule::Schedule;
 use crate::split::{Selection, Split};
 use candle_core::Device;
 use deform_features::{FeatureOptions, Normalization};
@@ -34,8 +37,12 @@ pub const VERSION: u32 = 1;
 /// Training settings (saved with the model).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
-    /// Total epochs; a resumed run may raise it.
+    /// Epoch budget (used when `steps` is `None`); a resumed run may change it.
     pub epochs: usize,
+    /// Budget in optimizer steps (rounded up to whole epochs), so that small and large sets get
+    /// the same number of updates; overrides `epochs`. Models saved before it read as `None`.
+    #[serde(default)]
+    pub steps: Option<usize>,
     /// Meshes per step (the authors: 50); the last batch of an epoch may be smaller.
     pub batch: usize,
     /// Adam's learning rate (1e-3).
@@ -56,12 +63,22 @@ pub struct TrainConfig {
     /// repeats splits exactly as by mesh. Models saved before this option read as false.
     #[serde(default)]
     pub split_by_shape: bool,
+    /// Learning-rate schedule and early stop. Models saved before schedules existed read as
+    /// [`Schedule::constant`] (a constant rate for the whole budget).
+    #[serde(default = "Schedule::constant")]
+    pub schedule: Schedule,
 }
+
+/// The step budget of a run given no budget: long enough for every set measured to converge
+/// first (horse-gallop, samba and the synthetic set stop on their own in fewer steps), so it
+/// only ends a run that keeps improving.
+pub const DEFAULT_MAX_STEPS: usize = 20_000;
 
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
             epochs: 100,
+            steps: None,
             batch: 50,
             lr: 1e-3,
             seed: 1,
@@ -69,15 +86,28 @@ impl Default for TrainConfig {
             test_fraction: 0.5,
             val_fraction: 0.1,
             split_by_shape: true,
+            schedule: Schedule::default(),
         }
     }
 }
 
 impl TrainConfig {
+    /// The run's length in epochs when an epoch takes `steps_per_epoch` steps.
+    pub fn epoch_budget(&self, steps_per_epoch: usize) -> usize {
+        match self.steps {
+            Some(steps) => steps.div_ceil(steps_per_epoch.max(1)),
+            None => self.epochs,
+        }
+    }
+
     pub fn validate(&self) -> Result<()> {
         if self.epochs == 0 {
             return Err(VaeError::argument("epochs", "must be at least 1"));
         }
+        if self.steps == Some(0) {
+            return Err(VaeError::argument("steps", "must be at least 1"));
+        }
+        self.schedule.validate()?;
         if self.batch == 0 {
             return Err(VaeError::argument("batch", "must be at least 1"));
         }
@@ -233,6 +263,14 @@ impl ModelFolder {
     }
     pub fn log(&self) -> PathBuf {
         self.dir.join("log.jsonl")
+    }
+    /// `run.json`: why training stopped ([`crate::RunStatus`]).
+    pub fn status(&self) -> PathBuf {
+        self.dir.join("run.json")
+    }
+    /// `loss.png`: the loss curves, drawn by the command line after training.
+    pub fn loss_plot(&self) -> PathBuf {
+        self.dir.join("loss.png")
     }
 
     /// Whether the folder holds a model (its `config.json`).

@@ -8,7 +8,8 @@
 //! features (`deform-features`) → normalisation fitted on the training split → a [`MeshVae`]
 //! whose graph operators come from a `mesh_hierarchy::Hierarchy` (Chebyshev or spatial
 //! convolutions from `spectral-conv`, pooling by edge contraction) → training with Adam,
-//! checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
+//! a learning-rate schedule, early stopping on the validation loss ([`Schedule`]; a run says
+//! why it stopped, [`StopReason`]), checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
 //! backward over reused buffers ([`Engine`], checked against candle's autograd) when it
 //! supports the model, and candle's autograd otherwise. A conditional model
 //! (`ModelConfig::labels`) also takes each mesh's label (see `model/cond.rs`); generation,
@@ -16,8 +17,9 @@
 //!
 //! The defaults are the paper's network as the authors' code runs it (`CCPC`, Chebyshev K = 3,
 //! 9 channels, latent 128, batch norm, σ = sqrt(2·sigmoid), decoder FC tied to the μ head, loss
-//! weights 40 / 3 / 1, Adam 1e-3, batch 50); `../shared/notes/authors-code.md` lists where that
-//! code departs from the paper's text, and [`ModelConfig`] offers both readings where they differ.
+//! weights 40 / 3 / 1, Adam 1e-3, batch 50); where that code departs from the paper's text,
+//! [`ModelConfig`] offers both readings. Unlike the authors' fixed 8,000 epochs, a run stops
+//! when its validation loss has stopped improving.
 //!
 //! ```
 //! use meshvae::{ModelConfig, TrainConfig, TrainOptions, TrainRequest, TrainedModel, train};
@@ -69,6 +71,7 @@ mod params;
 mod pca;
 mod reconstruct;
 mod rng;
+mod schedule;
 mod split;
 mod sse;
 mod structure;
@@ -87,7 +90,7 @@ pub use embed::{
 };
 pub use error::{Result, VaeError};
 pub use eval::{ErrorReport, error_report, mean_shape};
-pub use folder::{ModelFolder, ModelSpec, SplitFile, TrainConfig, TrainedModel};
+pub use folder::{DEFAULT_MAX_STEPS, ModelFolder, ModelSpec, SplitFile, TrainConfig, TrainedModel};
 pub use generate::{GenerateOptions, Generated, Neighbour, generate};
 pub use interpolate::{Interpolation, interpolate};
 pub use loss::{Loss, LossWeights};
@@ -96,10 +99,11 @@ pub use params::{ParamCount, param_count};
 pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
 pub use reconstruct::EvalReport;
 pub use rng::Rng;
+pub use schedule::{Decision, Schedule, ScheduleState, StopReason};
 pub use split::{Selection, Split, resolve_mesh};
 pub use structure::{Layer, Structure};
 pub use train::{
-    EpochRecord, TrainOptions, TrainRequest, TrainSummary, hierarchy_config, read_log, train,
-    validation_loss,
+    EpochRecord, RunStatus, TrainOptions, TrainRequest, TrainSummary, hierarchy_config, read_log,
+    read_status, train, validation_loss,
 };
 pub use tsne::{Calibration, TsneOptions, calibrate, tsne, tsne_cost};

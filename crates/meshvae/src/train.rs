@@ -3,7 +3,10 @@
 //! Each epoch shuffles the training meshes, takes Adam steps on batches, measures the
 //! validation and test losses (the authors' validation loss: w_rec · mean squared error with
 //! z = μ and batch norm in inference mode, here a true mean over the meshes) and appends a line
-//! to `log.jsonl`. Every [`TrainOptions::checkpoint_seconds`] (and after the last epoch) it
+//! to `log.jsonl`. The validation loss also drives the [`Schedule`]: the learning rate is cut
+//! on plateaus and the run stops, *converged*, once the loss has not reached a new best for the
+//! schedule's patience; otherwise it ends with its budget ([`TrainConfig::steps`] or
+//! `epochs`). `run.json` says which ([`RunStatus`]; `interrupted` until the run ends). Every [`TrainOptions::checkpoint_seconds`] (and after the last epoch) it
 //! writes the weights with the lowest validation loss so far (the training loss without
 //! validation meshes) to `weights.safetensors`, and the whole state to
 //! `checkpoint.safetensors`. The test loss is only logged, and chooses a second set of weights,
@@ -28,6 +31,7 @@ use crate::folder::{ModelFolder, TrainConfig};
 use crate::loss::LossWeights;
 use crate::model::MeshVae;
 use crate::rng::Rng;
+use crate::schedule::{Decision, Schedule, ScheduleState, StopReason};
 use crate::split::{Selection, Split};
 use candle_core::Device;
 use deform_features::FeatureOptions;
@@ -40,10 +44,12 @@ use std::time::Instant;
 
 mod epoch_log;
 mod setup;
+mod status;
 
 pub use epoch_log::read_log;
 use epoch_log::{append_log, truncate_log};
 use setup::{fresh_setup, resume_setup, write_model_files};
+pub use status::{RunStatus, read_status};
 
 /// What to train on and with which settings.
 #[derive(Debug, Clone)]
@@ -82,6 +88,11 @@ pub struct TrainOptions {
     /// a copy of a large model (~200 MB on a 42k-vertex mesh) nor the engine's buffers stay in
     /// memory beside the validation and checkpoint work.
     pub best_in_memory_params: usize,
+    /// Measure the test loss (only logged, never used for a choice of the run) after an epoch
+    /// once this many optimizer steps have passed since it was last measured, and after the
+    /// last epoch; 1 = every epoch. On a small set (one step an epoch) the test pass costs as
+    /// much as a third of the step, so measuring it every epoch would slow training by that.
+    pub test_every_steps: usize,
     pub device: Device,
     /// Train with the hand-written CPU step ([`crate::Engine`]) whenever it supports the model;
     /// `false` forces candle's autograd path (the reference).
@@ -96,6 +107,7 @@ impl Default for TrainOptions {
             progress: false,
             checkpoint_seconds: 60.0,
             best_in_memory_params: 16 << 20,
+            test_every_steps: 10,
             device: Device::Cpu,
             engine: true,
         }
@@ -117,17 +129,24 @@ pub struct EpochRecord {
     /// The same loss on the test meshes (none if the split has none).
     pub test_loss: Option<f64>,
     pub seconds: f64,
+    /// Optimizer steps taken so far, this epoch's included (0 in logs written before steps
+    /// were counted).
+    #[serde(default)]
+    pub step: u64,
+    /// The learning rate of the epoch's last step (absent from older logs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lr: Option<f64>,
 }
 
 impl EpochRecord {
-    /// The loss `selection` ranks epochs by (the training loss where that one is missing).
+    /// The loss `selection` ranks epochs by (the training loss where the validation loss is
+    /// missing; an epoch whose test loss was not measured never wins on the test loss).
     pub fn score(&self, selection: Selection) -> f64 {
         match selection {
-            Selection::Validation => self.val_loss,
-            Selection::Train => None,
-            Selection::Test => self.test_loss,
+            Selection::Validation => self.val_loss.unwrap_or(self.train_loss),
+            Selection::Train => self.train_loss,
+            Selection::Test => self.test_loss.unwrap_or(f64::INFINITY),
         }
-        .unwrap_or(self.train_loss)
     }
 }
 
@@ -136,7 +155,20 @@ impl EpochRecord {
 pub struct TrainSummary {
     /// Epochs run by this call (0 if the checkpoint had already reached the target).
     pub epochs_run: usize,
+    /// The budget in epochs.
     pub epochs_total: usize,
+    /// Why the run ended: converged or budget (an interrupted run returns no summary).
+    pub stop_reason: StopReason,
+    /// Optimizer steps over the whole run, and the epoch budget in steps.
+    pub steps: u64,
+    /// Whether the validation loss reached a new best within the schedule's patience (or the
+    /// last tenth of the run): a run cut by its budget while this holds had not finished
+    /// learning.
+    pub still_improving: bool,
+    /// The learning rate at the end.
+    pub lr: f64,
+    /// Seconds of training over every resumed part of the run.
+    pub seconds_total: f64,
     pub last: Option<EpochRecord>,
     pub best_epoch: usize,
     /// The best epoch's loss on the meshes that chose it (`selected_on`).
@@ -195,6 +227,8 @@ pub fn train(
         best_epoch: 0,
         best_test_loss: f64::INFINITY,
         best_test_epoch: 0,
+        schedule: ScheduleState::default(),
+        seconds: 0.0,
     };
     if options.resume && folder.checkpoint().is_file() {
         progress = Checkpoint::load(&folder.checkpoint(), &mut model, &mut adam)?;
@@ -202,10 +236,46 @@ pub fn train(
     truncate_log(&folder.log(), progress.epoch)?;
     let mut rng = Rng::from_state(progress.rng)?;
 
-    let epochs = spec.train.epochs;
     let batch = spec.train.batch;
     let train_ids = &data.split.train;
     let steps_per_epoch = train_ids.len().div_ceil(batch);
+    let epochs = spec.train.epoch_budget(steps_per_epoch);
+    let schedule: Schedule = spec.train.schedule;
+    let base_lr = spec.train.lr;
+    // Which path trains, said in `run.json` (the engine declines some models; see
+    // `Engine::unsupported`).
+    let engine_used = options.engine && crate::model::Engine::unsupported(&model).is_none();
+    adam.set_lr(
+        progress
+            .schedule
+            .lr(&schedule, base_lr, adam.step_count().max(1)),
+    )?;
+    let prior_seconds = progress.seconds;
+    let status = |progress: &Progress, reason: StopReason, adam: &Adam| RunStatus {
+        stop_reason: reason,
+        epochs: progress.epoch,
+        epoch_budget: epochs,
+        steps: adam.step_count(),
+        steps_per_epoch,
+        best_epoch: progress.best_epoch,
+        selected_on: data.split.selection(),
+        still_improving: progress
+            .schedule
+            .still_improving(&schedule, adam.step_count() as usize),
+        lr: adam.config().lr,
+        lr_cuts: progress.schedule.cuts,
+        seconds: progress.seconds,
+        path: if engine_used { "engine" } else { "candle" }.into(),
+    };
+    // A converged run resumed (say with a larger budget) has nothing left to learn.
+    let already_converged =
+        schedule.stops_early() && progress.schedule.since_best >= schedule.patience;
+    if !already_converged && progress.epoch < epochs {
+        folder.write_json(
+            &folder.status(),
+            &status(&progress, StopReason::Interrupted, &adam),
+        )?;
+    }
     let bar = progress_bar(options.progress, epochs, progress.epoch, steps_per_epoch);
     let mut last = None;
     let mut epochs_run = 0;
@@ -215,9 +285,20 @@ pub fn train(
     let keep_in_memory = model.param_count().with_biases <= options.best_in_memory_params;
     let mut kept_engine = None;
     let mut last_write = Instant::now();
+    let mut stop = if already_converged {
+        StopReason::Converged
+    } else {
+        StopReason::Budget
+    };
+    let first_epoch = if already_converged {
+        epochs + 1
+    } else {
+        progress.epoch + 1
+    };
 
-    for epoch in progress.epoch + 1..=epochs {
+    for epoch in first_epoch..=epochs {
         let t0 = Instant::now();
+        let steps_before = adam.step_count();
         let mut order = train_ids.clone();
         rng.shuffle(&mut order);
         let mut sums = [0.0f64; 4];
@@ -231,6 +312,11 @@ pub fn train(
             (None, false) => None,
         };
         for chunk in order.chunks(batch) {
+            adam.set_lr(
+                progress
+                    .schedule
+                    .lr(&schedule, base_lr, adam.step_count() + 1),
+            )?;
             let x = data.batch(chunk, device)?;
             let c = data.conditions(&model, chunk)?;
             let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
@@ -289,7 +375,24 @@ pub fn train(
             epoch_loss(&model, &data, ids, batch, &spec.train.loss, device, engine)
         };
         let val_loss = loss_on(&data.split.val)?;
-        let test_loss = loss_on(&data.split.test)?;
+        // The schedule sees the loss that chooses the weights (validation, or training).
+        let score = val_loss.unwrap_or(sums[0] / n);
+        let decision = progress
+            .schedule
+            .update(&schedule, score, order.chunks(batch).len());
+        if decision == Decision::Stop {
+            stop = StopReason::Converged;
+        }
+        let finished = epoch == epochs || decision == Decision::Stop;
+        // Due when the step count passes a multiple of `test_every_steps` (the same epochs
+        // whether or not the run was resumed in between), and at the end.
+        let every = options.test_every_steps.max(1) as u64;
+        let test_due = finished || adam.step_count() / every > steps_before / every;
+        let test_loss = if test_due {
+            loss_on(&data.split.test)?
+        } else {
+            None
+        };
         if keep_in_memory {
             kept_engine = engine;
         } else {
@@ -304,10 +407,12 @@ pub fn train(
             val_loss,
             test_loss,
             seconds: t0.elapsed().as_secs_f64(),
+            step: adam.step_count(),
+            lr: Some(adam.config().lr),
         };
         // A kill before the next checkpoint replays the epochs since and rewrites the same
         // weights, so writing best weights early is safe.
-        let score = record.score(selection);
+        debug_assert_eq!(score, record.score(selection));
         if score < progress.best_loss {
             best = keep_best(&model, keep_in_memory, &folder.weights())?;
             progress.best_loss = score;
@@ -323,8 +428,9 @@ pub fn train(
         }
         progress.epoch = epoch;
         progress.rng = rng.state();
+        progress.seconds = prior_seconds + start.elapsed().as_secs_f64();
         append_log(&folder.log(), &record)?;
-        if epoch == epochs || last_write.elapsed().as_secs_f64() >= options.checkpoint_seconds {
+        if finished || last_write.elapsed().as_secs_f64() >= options.checkpoint_seconds {
             // The best weights first: a kill in between leaves a checkpoint that replays the
             // epochs since the previous one and rewrites them identically.
             if let Some(best) = best.take() {
@@ -334,23 +440,39 @@ pub fn train(
                 model.save_snapshot(&best, &folder.weights_selected_on_test())?;
             }
             Checkpoint::save(&folder.checkpoint(), &model, &adam, &progress)?;
+            let reason = if finished {
+                stop
+            } else {
+                StopReason::Interrupted
+            };
+            folder.write_json(&folder.status(), &status(&progress, reason, &adam))?;
             last_write = Instant::now();
         }
         let show = |l: Option<f64>| l.map_or("–".into(), |t| format!("{t:.3}"));
         bar.set_message(format!(
-            "epoch {epoch}/{epochs}  loss {:.3}  val {}  test {}",
+            "epoch {epoch}/{epochs}  loss {:.3}  val {}  test {}  lr {:.1e}",
             record.train_loss,
             show(val_loss),
-            show(test_loss)
+            show(test_loss),
+            adam.config().lr,
         ));
         on_epoch(&record);
         last = Some(record);
         epochs_run += 1;
+        if finished {
+            break;
+        }
     }
     bar.finish();
+    let state = progress.schedule;
     Ok(TrainSummary {
         epochs_run,
         epochs_total: epochs,
+        stop_reason: stop,
+        steps: adam.step_count(),
+        still_improving: state.still_improving(&schedule, adam.step_count() as usize),
+        lr: adam.config().lr,
+        seconds_total: prior_seconds + start.elapsed().as_secs_f64(),
         last,
         best_epoch: progress.best_epoch,
         best_loss: progress.best_loss,

@@ -7,8 +7,8 @@ use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
 use meshvae::{
-    ModelConfig, ModelFolder, Selection, Split, SplitFile, TrainConfig, TrainOptions, TrainRequest,
-    TrainedModel, VaeError, read_log, train,
+    DEFAULT_MAX_STEPS, ModelConfig, ModelFolder, Schedule, Selection, Split, SplitFile, StopReason,
+    TrainConfig, TrainOptions, TrainRequest, TrainedModel, VaeError, read_log, read_status, train,
 };
 use std::path::{Path, PathBuf};
 
@@ -101,6 +101,11 @@ fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weigh
     let text = std::fs::read_to_string(folder.log()).unwrap();
     let first: String = text.lines().take(1).map(|l| format!("{l}\n")).collect();
     std::fs::write(folder.log(), first).unwrap();
+    // Such a run's run.json says it was interrupted.
+    let status = std::fs::read_to_string(folder.status()).unwrap();
+    let status = status.replace("\"budget\"", "\"interrupted\"");
+    assert!(status.contains("interrupted"));
+    std::fs::write(folder.status(), status).unwrap();
     let resumed = train(&request(&set, &early, 2), &options(true, false), |_| {}).unwrap();
     assert_eq!(resumed.epochs_run, 2);
     let _ = std::fs::remove_dir_all(&dir);
@@ -110,6 +115,8 @@ fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weigh
 fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
     let options = |resume: bool, force: bool| TrainOptions {
         best_in_memory_params: *best_in_memory_params,
+        // Every epoch's test loss, to compare the two logs line by line.
+        test_every_steps: 1,
         ..options(resume, force)
     };
     let set = small_set(3, 8);
@@ -136,8 +143,33 @@ fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
     let resumed = train(&request(&set, &parts, 4), &options(true, false), |_| {}).unwrap();
     assert_eq!(resumed.epochs_run, 2);
 
-    let a = std::fs::read(ModelFolder::new(&whole).checkpoint()).unwrap();
-    let b = std::fs::read(ModelFolder::new(&parts).checkpoint()).unwrap();
+    // Every tensor of the checkpoint but the wall time spent.
+    let checkpoint = |dir: &Path| {
+        let mut map =
+            candle_core::safetensors::load(ModelFolder::new(dir).checkpoint(), &Device::Cpu)
+                .unwrap()
+                .into_iter()
+                .filter(|(k, _)| k != "meta.seconds")
+                .map(|(k, t)| {
+                    let t = t
+                        .flatten_all()
+                        .unwrap()
+                        .to_dtype(candle_core::DType::F64)
+                        .unwrap();
+                    let bits: Vec<u64> = t
+                        .to_vec1::<f64>()
+                        .unwrap()
+                        .iter()
+                        .map(|x| x.to_bits())
+                        .collect();
+                    (k, bits)
+                })
+                .collect::<Vec<_>>();
+        map.sort();
+        map
+    };
+    let (a, b) = (checkpoint(&whole), checkpoint(&parts));
+    assert!(a.len() > 10 && a.iter().any(|(k, _)| k == "meta.schedule"));
     assert!(a == b, "checkpoints differ after resumption");
     let a = std::fs::read(ModelFolder::new(&whole).weights()).unwrap();
     let b = std::fs::read(ModelFolder::new(&parts).weights()).unwrap();
@@ -260,6 +292,11 @@ fn test_meshes_influence_neither_training_nor_the_chosen_checkpoint() {
     let set = small_set(3, 8);
     let out_a = scratch("leak-a");
     let out_b = scratch("leak-b");
+    // Every epoch's test loss, to see each one differ.
+    let options = |resume, force| TrainOptions {
+        test_every_steps: 1,
+        ..options(resume, force)
+    };
     let a = train(&request(&set, &out_a, 4), &options(false, false), |_| {}).unwrap();
     assert_eq!(a.selected_on, Selection::Validation);
     let split = TrainedModel::load(&out_a, &Device::Cpu).unwrap().split;
@@ -402,4 +439,104 @@ fn copies_of_one_shape_stay_on_one_side_of_the_split() {
     let err = train(&req, &options(true, false), |_| {}).unwrap_err();
     assert!(err.to_string().contains("training settings"), "{err}");
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The default budget and schedule on a small set: the run stops on its own (converged) long
+/// before the budget, after `patience` steps without a new best validation loss, and says so;
+/// the same run cut short by a small budget says `budget` and that it was still improving.
+#[test]
+fn default_training_stops_converged_and_a_short_budget_says_budget() {
+    let set = small_set(7, 8);
+    let dir = scratch("converged");
+    let mut req = request(&set, &dir, 1);
+    req.train.steps = Some(DEFAULT_MAX_STEPS);
+    let schedule = Schedule::default();
+    assert_eq!(req.train.schedule, schedule);
+    let mut statuses = Vec::new();
+    let options = TrainOptions {
+        checkpoint_seconds: 2.0,
+        ..options(false, false)
+    };
+    let summary = train(&req, &options, |record| {
+        if record.epoch % 500 == 0 {
+            statuses.push(read_status(&ModelFolder::new(&dir)).unwrap().unwrap());
+        }
+    })
+    .unwrap();
+    assert_eq!(summary.stop_reason, StopReason::Converged, "{summary:?}");
+    assert!(!summary.still_improving);
+    assert!(summary.epochs_run < summary.epochs_total, "{summary:?}");
+    // While it ran, run.json said what a kill would leave: interrupted.
+    assert!(!statuses.is_empty());
+    assert!(
+        statuses
+            .iter()
+            .all(|s| s.stop_reason == StopReason::Interrupted)
+    );
+    let folder = ModelFolder::new(&dir);
+    let status = read_status(&folder).unwrap().unwrap();
+    assert_eq!(status.stop_reason, StopReason::Converged);
+    assert_eq!(status.steps, summary.steps);
+    assert_eq!(status.path, "engine");
+    let text = std::fs::read_to_string(folder.status()).unwrap();
+    assert!(text.contains("\"stop_reason\": \"converged\""), "{text}");
+
+    // The stopping rule, checked on the log: no validation loss of the last `patience` steps
+    // beat the best before them by the schedule's margin, and the rate was cut on the way.
+    let log = read_log(&folder.log()).unwrap();
+    let last = log.last().unwrap();
+    assert_eq!(last.step, summary.steps);
+    let cut = last.step - schedule.patience as u64;
+    let before = log
+        .iter()
+        .filter(|r| r.step <= cut)
+        .filter_map(|r| r.val_loss)
+        .fold(f64::INFINITY, f64::min);
+    let after = log
+        .iter()
+        .filter(|r| r.step > cut)
+        .filter_map(|r| r.val_loss)
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        after >= before * (1.0 - schedule.min_improvement),
+        "{after} vs {before}"
+    );
+    assert!(log.iter().any(|r| r.lr.unwrap() < req.train.lr), "no cut");
+    assert!(
+        log.iter().any(|r| r.test_loss.is_none()),
+        "test every epoch"
+    );
+    assert!(
+        last.test_loss.is_some(),
+        "the last epoch measures the test loss"
+    );
+
+    // Resumed with a larger budget, a converged run has nothing left to do.
+    let mut more = req.clone();
+    more.train.steps = Some(2 * DEFAULT_MAX_STEPS);
+    let again = train(&more, &options_resume(), |_| {}).unwrap();
+    assert_eq!(
+        (again.epochs_run, again.stop_reason),
+        (0, StopReason::Converged)
+    );
+
+    // Cut short: the budget ends the run while the loss still falls, and it says so.
+    let short = scratch("budget");
+    let mut req = request(&set, &short, 1);
+    req.train.steps = Some(60);
+    let summary = train(&req, &options, |_| {}).unwrap();
+    assert_eq!(summary.stop_reason, StopReason::Budget);
+    assert!(summary.still_improving);
+    assert_eq!(summary.steps, 60);
+    let status = read_status(&ModelFolder::new(&short)).unwrap().unwrap();
+    assert_eq!(
+        (status.stop_reason, status.still_improving),
+        (StopReason::Budget, true)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&short);
+}
+
+fn options_resume() -> TrainOptions {
+    options(true, false)
 }

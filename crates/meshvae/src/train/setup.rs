@@ -6,6 +6,7 @@ use crate::config::ModelConfig;
 use crate::data::MeshData;
 use crate::error::{Result, VaeError};
 use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, VERSION};
+use crate::schedule::StopReason;
 use crate::split::Split;
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
 use mesh_io::{MeshSet, ShapeGroups, TriMesh};
@@ -164,6 +165,7 @@ pub(super) fn resume_setup(
         a.test_fraction,
         a.val_fraction,
         a.split_by_shape,
+        a.schedule,
     ) != (
         b.batch,
         b.lr,
@@ -172,20 +174,23 @@ pub(super) fn resume_setup(
         b.test_fraction,
         b.val_fraction,
         b.split_by_shape,
+        b.schedule,
     ) {
-        differences.push("training settings other than epochs");
+        differences.push("training settings other than the budget");
     }
     if !differences.is_empty() {
         return Err(VaeError::model(
             &folder.dir,
             format!(
-                "cannot resume: the {} differ from this model's (only --epochs may change)",
+                "cannot resume: the {} differ from this model's (only the budget, --epochs or \
+                 --steps, may change)",
                 differences.join(", ")
             ),
         ));
     }
-    if spec.train.epochs != request.train.epochs {
+    if (spec.train.epochs, spec.train.steps) != (request.train.epochs, request.train.steps) {
         spec.train.epochs = request.train.epochs;
+        spec.train.steps = request.train.steps;
         folder.write_json(&folder.config(), &spec)?;
     }
     let hierarchy = Hierarchy::load(&folder.hierarchy())?;
@@ -210,6 +215,21 @@ fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Re
     let log = folder.log();
     if folder.checkpoint().is_file() || !log.is_file() {
         return Ok(());
+    }
+    if let Some(status) = super::read_status(folder)?
+        && status.stop_reason != StopReason::Interrupted
+    {
+        return Err(VaeError::model(
+            &folder.dir,
+            format!(
+                "cannot resume: its run finished ({}, {} epochs) but {}, which --resume \
+                 continues from, is gone; the trained weights are untouched. To train longer, \
+                 start a new folder (or this one with --force)",
+                status.stop_reason,
+                status.epochs,
+                folder.checkpoint().display()
+            ),
+        ));
     }
     let text = std::fs::read_to_string(&log).map_err(|e| VaeError::io(&log, e))?;
     let logged = text
@@ -259,6 +279,8 @@ fn prepare_out_dir(folder: &ModelFolder, force: bool) -> Result<()> {
                 folder.weights(),
                 folder.weights_selected_on_test(),
                 folder.log(),
+                folder.status(),
+                folder.loss_plot(),
                 folder.hierarchy(),
                 folder.normalization(),
                 folder.split(),

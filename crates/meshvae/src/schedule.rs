@@ -1,0 +1,292 @@
+//! The learning-rate schedule and the stopping rule: a linear warm-up, then the rate is cut
+//! whenever the validation loss has not reached a new best for a while (reduce on plateau), and
+//! training stops — *converged* — once it has gone `patience` optimizer steps without one.
+//!
+//! Every length is in optimizer steps, not epochs, so that a set of 20 meshes (one step per
+//! epoch) and one of 2,000 get the same number of updates. The loss is looked at once per epoch;
+//! a new best must be lower than the previous best by the fraction `min_improvement`, so that
+//! noise in the last digits does not keep a finished run going.
+
+use crate::error::{Result, VaeError};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// How the learning rate changes and when training stops on its own (saved with the model).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Schedule {
+    /// The rate rises linearly from a tenth of `lr` to `lr` over this many steps (0: none).
+    pub warmup_steps: usize,
+    /// Multiply the rate by `lr_factor` after this many steps without a new best (0: the rate
+    /// stays constant after the warm-up).
+    pub lr_patience: usize,
+    pub lr_factor: f64,
+    /// The rate never falls below `lr · min_lr_ratio`.
+    pub min_lr_ratio: f64,
+    /// Stop after this many steps without a new best validation loss (0: never; the run uses
+    /// its whole budget).
+    pub patience: usize,
+    /// A new best must lie below the previous best by this fraction of it.
+    pub min_improvement: f64,
+}
+
+impl Default for Schedule {
+    /// The measured defaults (docs/benchmarks.md, "Convergence"): the rate is halved after 400
+    /// steps without a new best (at most five times), and a run stops after 1,500.
+    fn default() -> Self {
+        Self {
+            warmup_steps: 0,
+            lr_patience: 400,
+            lr_factor: 0.5,
+            min_lr_ratio: 1.0 / 32.0,
+            patience: 1500,
+            min_improvement: 1e-3,
+        }
+    }
+}
+
+impl Schedule {
+    /// A constant rate and no early stop: how every model trained before schedules existed
+    /// (its folder reads as this).
+    pub fn constant() -> Self {
+        Self {
+            warmup_steps: 0,
+            lr_patience: 0,
+            lr_factor: 1.0,
+            min_lr_ratio: 1.0,
+            patience: 0,
+            min_improvement: 0.0,
+        }
+    }
+
+    /// Whether the run may stop before its budget.
+    pub fn stops_early(&self) -> bool {
+        self.patience > 0
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let fraction = |name: &'static str, x: f64, lo: f64, hi: f64| {
+            if x.is_finite() && (lo..=hi).contains(&x) {
+                Ok(())
+            } else {
+                Err(VaeError::argument(
+                    name,
+                    format!("{x} is not in [{lo}, {hi}]"),
+                ))
+            }
+        };
+        fraction("lr_factor", self.lr_factor, f64::MIN_POSITIVE, 1.0)?;
+        fraction("min_lr_ratio", self.min_lr_ratio, f64::MIN_POSITIVE, 1.0)?;
+        fraction("min_improvement", self.min_improvement, 0.0, 0.5)
+    }
+}
+
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StopReason {
+    /// The validation loss stopped improving (the schedule's patience ran out).
+    Converged,
+    /// The step or epoch budget was used up first.
+    Budget,
+    /// The process ended before either (killed, or a crash): `--resume` continues it.
+    Interrupted,
+}
+
+impl StopReason {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Converged => "converged",
+            Self::Budget => "budget",
+            Self::Interrupted => "interrupted",
+        }
+    }
+}
+
+impl fmt::Display for StopReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// The schedule's state between epochs (kept in the checkpoint, so a resumed run continues the
+/// same schedule).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScheduleState {
+    /// The current rate is `lr · scale` (before the warm-up factor).
+    pub scale: f64,
+    /// Best validation loss by the schedule's rule (a fraction `min_improvement` below the
+    /// previous best to count).
+    pub best: f64,
+    /// Steps since that best, and since the last rate cut (or the best, whichever is later).
+    pub since_best: usize,
+    pub since_cut: usize,
+    /// Rate cuts so far.
+    pub cuts: usize,
+}
+
+impl Default for ScheduleState {
+    fn default() -> Self {
+        Self {
+            scale: 1.0,
+            best: f64::INFINITY,
+            since_best: 0,
+            since_cut: 0,
+            cuts: 0,
+        }
+    }
+}
+
+/// What the schedule decided after an epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Decision {
+    Continue,
+    /// The rate was cut; training goes on.
+    CutRate,
+    /// Patience ran out: the run has converged.
+    Stop,
+}
+
+impl ScheduleState {
+    /// The rate of optimizer step `step` (1-based, counted over the whole run).
+    pub fn lr(&self, schedule: &Schedule, base_lr: f64, step: u64) -> f64 {
+        let warm = if schedule.warmup_steps > 0 && (step as usize) < schedule.warmup_steps {
+            0.1 + 0.9 * step as f64 / schedule.warmup_steps as f64
+        } else {
+            1.0
+        };
+        base_lr * self.scale * warm
+    }
+
+    /// Takes an epoch of `steps` steps that ended with validation loss `loss`.
+    pub fn update(&mut self, schedule: &Schedule, loss: f64, steps: usize) -> Decision {
+        if loss.is_finite() && loss < self.best * (1.0 - schedule.min_improvement) {
+            self.best = loss;
+            self.since_best = 0;
+            self.since_cut = 0;
+            return Decision::Continue;
+        }
+        self.since_best += steps;
+        self.since_cut += steps;
+        if schedule.stops_early() && self.since_best >= schedule.patience {
+            return Decision::Stop;
+        }
+        let floor = schedule.min_lr_ratio;
+        if schedule.lr_patience > 0 && self.since_cut >= schedule.lr_patience && self.scale > floor
+        {
+            self.scale = (self.scale * schedule.lr_factor).max(floor);
+            self.since_cut = 0;
+            self.cuts += 1;
+            return Decision::CutRate;
+        }
+        Decision::Continue
+    }
+
+    /// Whether the loss was still reaching new bests recently: within the last `patience`
+    /// steps (or, without early stopping, the last tenth of `steps_done`).
+    pub fn still_improving(&self, schedule: &Schedule, steps_done: usize) -> bool {
+        let window = if schedule.stops_early() {
+            schedule.patience
+        } else {
+            (steps_done / 10).max(1)
+        };
+        self.since_best < window
+    }
+
+    /// Packed for the checkpoint.
+    pub fn to_vec(&self) -> Vec<f64> {
+        vec![
+            self.scale,
+            self.best,
+            self.since_best as f64,
+            self.since_cut as f64,
+            self.cuts as f64,
+        ]
+    }
+
+    pub fn from_slice(v: &[f64]) -> Option<Self> {
+        let &[scale, best, since_best, since_cut, cuts] = v else {
+            return None;
+        };
+        Some(Self {
+            scale,
+            best,
+            since_best: since_best as usize,
+            since_cut: since_cut as usize,
+            cuts: cuts as usize,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn schedule() -> Schedule {
+        Schedule {
+            warmup_steps: 10,
+            lr_patience: 4,
+            lr_factor: 0.5,
+            min_lr_ratio: 0.5,
+            patience: 12,
+            min_improvement: 0.01,
+        }
+    }
+
+    #[test]
+    fn warm_up_rises_linearly_to_the_rate() {
+        let s = schedule();
+        let state = ScheduleState::default();
+        assert!((state.lr(&s, 1.0, 0) - 0.1).abs() < 1e-12);
+        assert!((state.lr(&s, 1.0, 5) - 0.55).abs() < 1e-12);
+        assert_eq!(state.lr(&s, 1.0, 10), 1.0);
+        assert_eq!(state.lr(&Schedule::constant(), 2.0, 0), 2.0);
+    }
+
+    #[test]
+    fn plateaus_cut_the_rate_down_to_the_floor_then_stop() {
+        let s = schedule();
+        let mut st = ScheduleState::default();
+        assert_eq!(st.update(&s, 10.0, 2), Decision::Continue);
+        // Improvements smaller than 1 % do not count.
+        assert_eq!(st.update(&s, 9.95, 2), Decision::Continue);
+        assert_eq!(st.since_best, 2);
+        assert_eq!(st.update(&s, 9.95, 2), Decision::CutRate);
+        assert_eq!((st.scale, st.cuts, st.since_cut), (0.5, 1, 0));
+        // At the floor: no more cuts, and 12 steps without a best stop the run.
+        for _ in 0..3 {
+            assert_eq!(st.update(&s, 9.99, 2), Decision::Continue);
+        }
+        assert_eq!(st.update(&s, 9.99, 2), Decision::Stop);
+        assert!(!st.still_improving(&s, 100));
+        // A real improvement resets both counters but keeps the rate.
+        assert_eq!(st.update(&s, 5.0, 2), Decision::Continue);
+        assert_eq!((st.since_best, st.since_cut, st.scale), (0, 0, 0.5));
+        assert!(st.still_improving(&s, 100));
+        assert_eq!(st.lr(&s, 1.0, 100), 0.5);
+    }
+
+    #[test]
+    fn without_patience_nothing_stops_and_nan_is_no_improvement() {
+        let s = Schedule::constant();
+        let mut st = ScheduleState::default();
+        for _ in 0..100 {
+            assert_eq!(st.update(&s, f64::NAN, 50), Decision::Continue);
+        }
+        assert_eq!(st.scale, 1.0);
+        assert!(!st.still_improving(&s, 5000));
+        let packed = st.to_vec();
+        assert_eq!(ScheduleState::from_slice(&packed), Some(st));
+        assert_eq!(ScheduleState::from_slice(&packed[..3]), None);
+        assert!(s.validate().is_ok() && Schedule::default().validate().is_ok());
+        let bad = Schedule {
+            lr_factor: 0.0,
+            ..Schedule::default()
+        };
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("lr_factor")
+        );
+    }
+}

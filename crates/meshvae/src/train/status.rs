@@ -1,0 +1,43 @@
+//! `run.json`: where a run stands and why it ended, written with every checkpoint.
+
+use crate::error::Result;
+use crate::folder::ModelFolder;
+use crate::schedule::StopReason;
+use crate::split::Selection;
+use serde::{Deserialize, Serialize};
+
+/// The state of a model's training run. While the run goes on (and if it is killed) its
+/// `stop_reason` is `interrupted`; the last checkpoint of a finished run writes `converged` or
+/// `budget`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunStatus {
+    pub stop_reason: StopReason,
+    /// Epochs finished, and the budget in epochs.
+    pub epochs: usize,
+    pub epoch_budget: usize,
+    /// Optimizer steps taken, and how many one epoch takes.
+    pub steps: u64,
+    pub steps_per_epoch: usize,
+    /// The epoch of the weights in `weights.safetensors`, and the loss that chose it.
+    pub best_epoch: usize,
+    pub selected_on: Selection,
+    /// Whether the validation loss reached a new best within the schedule's patience (or the
+    /// last tenth of the run without early stopping).
+    pub still_improving: bool,
+    /// The learning rate at the end, and how many times the schedule cut it.
+    pub lr: f64,
+    pub lr_cuts: usize,
+    /// Seconds of training over every resumed part.
+    pub seconds: f64,
+    /// What computed the steps: `engine` (the hand-written CPU step) or `candle` (autograd).
+    pub path: String,
+}
+
+/// The folder's `run.json`, or `None` for a model trained before it existed.
+pub fn read_status(folder: &ModelFolder) -> Result<Option<RunStatus>> {
+    let path = folder.status();
+    if !path.is_file() {
+        return Ok(None);
+    }
+    folder.read_json(&path).map(Some)
+}
