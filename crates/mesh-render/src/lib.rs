@@ -41,6 +41,7 @@
 //! # Ok(()) }
 //! ```
 
+mod axis;
 mod camera;
 pub mod colormap;
 mod error;

@@ -106,6 +106,16 @@ pub struct TrainArgs {
     /// Features without the integrability correction (smoother, inexact round trip).
     #[arg(long)]
     plain_features: bool,
+    /// No batch norm after the convolutions (the authors' code has it).
+    #[arg(long)]
+    no_batch_norm: bool,
+    /// tanh on the last encoder convolution, as the authors' code (the paper's text: linear).
+    #[arg(long)]
+    last_encoder_tanh: bool,
+    /// Fit the feature normalisation on every mesh, test meshes included, as the authors' code
+    /// (for comparisons: the test meshes then shape the model's inputs).
+    #[arg(long)]
+    normalize_on_all: bool,
     /// Continue the model in --out from its last checkpoint.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
@@ -202,6 +212,8 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         k: args.k.unwrap_or(base_model.k),
         latent: args.latent.unwrap_or(base_model.latent),
         channels: args.channels.unwrap_or(base_model.channels),
+        batch_norm: base_model.batch_norm && !args.no_batch_norm,
+        last_encoder_linear: base_model.last_encoder_linear && !args.last_encoder_tanh,
         ..base_model
     };
     let model = if args.labels.is_some() || args.conditional {
@@ -228,6 +240,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         (None, Some(steps)) => train.steps = Some(steps),
         (None, None) => {}
     }
+    train.normalize_on_all = base_train.normalize_on_all || args.normalize_on_all;
     if let Some(p) = args.patience {
         train.schedule.patience = p;
     }

@@ -73,6 +73,31 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         "--quiet",
     ]));
     assert_eq!(split(&by_mesh)["by_shape"], false);
+    // The authors' choices where they differ from ours, for A/B runs, recorded in config.json.
+    let authors = dir.join("authors");
+    ok(&meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&authors),
+        "--epochs",
+        "1",
+        "--batch",
+        "4",
+        "--latent",
+        "16",
+        "--no-batch-norm",
+        "--last-encoder-tanh",
+        "--normalize-on-all",
+        "--quiet",
+    ]));
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(authors.join("config.json")).unwrap())
+            .unwrap();
+    assert_eq!(config["model"]["batch_norm"], false);
+    assert_eq!(config["model"]["last_encoder_linear"], false);
+    assert_eq!(config["train"]["normalize_on_all"], true);
+    assert!(config["train"]["schedule"]["patience"].as_u64().unwrap() > 0);
     // The synthetic set has no repeated shape: both ways draw the same meshes.
     assert_eq!(split(&by_mesh)["test"], split(&model)["test"]);
 

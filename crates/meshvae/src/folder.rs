@@ -67,6 +67,11 @@ pub struct TrainConfig {
     /// [`Schedule::constant`] (a constant rate for the whole budget).
     #[serde(default = "Schedule::constant")]
     pub schedule: Schedule,
+    /// Fit the feature normalisation on every mesh, test meshes included (the authors' code),
+    /// instead of the training meshes only. For comparisons: it lets the test meshes shape the
+    /// model's inputs.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub normalize_on_all: bool,
 }
 
 /// The step budget of a run given no budget: long enough for every set measured to converge
@@ -87,6 +92,7 @@ impl Default for TrainConfig {
             val_fraction: 0.1,
             split_by_shape: true,
             schedule: Schedule::default(),
+            normalize_on_all: false,
         }
     }
 }

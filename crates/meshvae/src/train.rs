@@ -449,8 +449,18 @@ pub fn train(
             last_write = Instant::now();
         }
         let show = |l: Option<f64>| l.map_or("–".into(), |t| format!("{t:.3}"));
+        // The bar's length is the budget; a run usually stops earlier, when the count of steps
+        // without a new best reaches the patience.
+        let stall = if schedule.stops_early() {
+            format!(
+                "  no new best for {}/{} steps",
+                progress.schedule.since_best, schedule.patience
+            )
+        } else {
+            String::new()
+        };
         bar.set_message(format!(
-            "epoch {epoch}/{epochs}  loss {:.3}  val {}  test {}  lr {:.1e}",
+            "epoch {epoch}/{epochs}  loss {:.3}  val {}  test {}  lr {:.1e}{stall}",
             record.train_loss,
             show(val_loss),
             show(test_loss),

@@ -43,7 +43,11 @@ pub(super) fn fresh_setup(
     prepare_out_dir(folder, force)?;
     let template = set.template();
     let hierarchy = Hierarchy::build(&template, &hierarchy_config)?;
-    let mut data = MeshData::prepare(set, split, request.features)?;
+    let mut data = if train.normalize_on_all {
+        MeshData::prepare_normalized_on_all(set, split, request.features)?
+    } else {
+        MeshData::prepare(set, split, request.features)?
+    };
     if let Some(labels) = &labels {
         data = data.with_labels(labels.clone())?;
     }
@@ -166,6 +170,7 @@ pub(super) fn resume_setup(
         a.val_fraction,
         a.split_by_shape,
         a.schedule,
+        a.normalize_on_all,
     ) != (
         b.batch,
         b.lr,
@@ -175,6 +180,7 @@ pub(super) fn resume_setup(
         b.val_fraction,
         b.split_by_shape,
         b.schedule,
+        b.normalize_on_all,
     ) {
         differences.push("training settings other than the budget");
     }
