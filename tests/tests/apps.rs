@@ -5,7 +5,7 @@
 use candle_core::Device;
 use mesh_io::datasets;
 use meshvae::{
-    EmbedOptions, GenerateOptions, ModelConfig, TrainConfig, TrainOptions, TrainRequest,
+    EmbedOptions, GenerateOptions, ModelConfig, Schedule, TrainConfig, TrainOptions, TrainRequest,
     TrainedModel, loop_measure,
 };
 
@@ -33,6 +33,9 @@ fn horse_gallop_embeddings_are_closed_loops() {
         train: TrainConfig {
             epochs: EPOCHS,
             batch: 24,
+            // The rate and constant schedule the thresholds were measured with.
+            lr: 1e-3,
+            schedule: Schedule::constant(),
             ..TrainConfig::default()
         },
         features: Default::default(),

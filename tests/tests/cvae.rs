@@ -6,7 +6,8 @@
 use candle_core::Device;
 use mesh_io::{MeshSet, datasets};
 use meshvae::{
-    GenerateOptions, ModelConfig, Split, TrainConfig, TrainOptions, TrainRequest, TrainedModel,
+    GenerateOptions, ModelConfig, Schedule, Split, TrainConfig, TrainOptions, TrainRequest,
+    TrainedModel,
 };
 use std::path::Path;
 use std::time::Instant;
@@ -167,6 +168,9 @@ fn synthetic_bend_twist_samples_follow_their_label() {
             epochs: SYNTH_EPOCHS,
             batch: 4,
             loss: KL_HEAVY,
+            // The rate and constant schedule the shares were measured with.
+            lr: 1e-3,
+            schedule: Schedule::constant(),
             ..TrainConfig::default()
         },
     );
@@ -208,6 +212,9 @@ fn horse_gallop_and_poses_samples_follow_their_label() {
             epochs: HORSE_EPOCHS,
             batch: 4,
             loss: KL_HEAVY,
+            // The rate and constant schedule the shares were measured with.
+            lr: 1e-3,
+            schedule: Schedule::constant(),
             ..TrainConfig::default()
         },
     );

@@ -56,7 +56,8 @@ pub struct TrainArgs {
     /// Meshes per step [default: 50].
     #[arg(long)]
     batch: Option<usize>,
-    /// Adam learning rate [default: 0.001].
+    /// Adam's initial learning rate (the schedule halves it on plateaus) [default: 0.01; the
+    /// authors: 0.001].
     #[arg(long)]
     lr: Option<f64>,
     /// Chebyshev order K [default: 3].

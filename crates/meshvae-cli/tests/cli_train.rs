@@ -57,40 +57,37 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     };
     assert_eq!(split(&model)["by_shape"], true);
     fails_with(&resume(&["--split-by-mesh"]), 1, "cannot resume");
+    // One epoch into a new folder, with `extra` options.
+    let one_epoch = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            s(&set),
+            "--out",
+            s(out),
+            "--epochs",
+            "1",
+            "--batch",
+            "4",
+            "--latent",
+            "16",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        ok(&meshvae(&args));
+    };
     let by_mesh = dir.join("by-mesh");
-    ok(&meshvae(&[
-        "train",
-        s(&set),
-        "--out",
-        s(&by_mesh),
-        "--epochs",
-        "1",
-        "--batch",
-        "4",
-        "--latent",
-        "16",
-        "--split-by-mesh",
-        "--quiet",
-    ]));
+    one_epoch(&by_mesh, &["--split-by-mesh"]);
     assert_eq!(split(&by_mesh)["by_shape"], false);
     // The authors' choices where they differ from ours, for A/B runs, recorded in config.json.
     let authors = dir.join("authors");
-    ok(&meshvae(&[
-        "train",
-        s(&set),
-        "--out",
-        s(&authors),
-        "--epochs",
-        "1",
-        "--batch",
-        "4",
-        "--latent",
-        "16",
-        "--no-batch-norm",
-        "--last-encoder-tanh",
-        "--normalize-on-all",
-        "--quiet",
-    ]));
+    one_epoch(
+        &authors,
+        &[
+            "--no-batch-norm",
+            "--last-encoder-tanh",
+            "--normalize-on-all",
+        ],
+    );
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(authors.join("config.json")).unwrap())
             .unwrap();

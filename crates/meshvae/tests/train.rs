@@ -192,7 +192,7 @@ fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
 
     // Resuming with other settings is refused, naming what differs.
     let mut other = request(&set, &parts, 5);
-    other.train.lr = 0.01;
+    other.train.lr = 0.05;
     let err = train(&other, &options(true, false), |_| {}).unwrap_err();
     assert!(err.to_string().contains("training settings"), "{err}");
 

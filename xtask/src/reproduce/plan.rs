@@ -276,14 +276,15 @@ impl Run {
     }
 
     /// The training settings: the paper's defaults, this run's epochs and seed, the protocol.
-    /// A constant learning rate for exactly `epochs` epochs, as every recorded run so far
-    /// trained (runs to convergence, with the default schedule, are the next plan's).
+    /// A constant learning rate of 1e-3 (the authors') for exactly `epochs` epochs, as every
+    /// recorded run so far trained (runs to convergence, with the default schedule, are the next plan's).
     pub fn train_config(&self) -> TrainConfig {
         let mut train = TrainConfig {
             epochs: self.epochs,
             seed: self.seed,
             split_by_shape: self.by_shape,
             schedule: meshvae::Schedule::constant(),
+            lr: 1e-3,
             ..TrainConfig::default()
         };
         (self.protocol.configure)(&mut train);

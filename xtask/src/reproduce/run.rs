@@ -60,6 +60,15 @@ pub struct RunResult {
     /// Threads the run trained on (its session's; `--jobs` shares the cores between runs).
     #[serde(default)]
     pub threads: Option<usize>,
+    /// Why training stopped (`converged` or `budget`), its optimizer steps, and the mean
+    /// per-vertex distance after rigid alignment (the authors' measure); absent from results
+    /// written before runs recorded them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_reason: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_mean_distance_rigid: Option<f64>,
 }
 
 impl RunResult {
@@ -179,6 +188,7 @@ pub fn execute(
             (Some(errors.rms), Some(epoch))
         };
     let log = meshvae::read_log(&folder.log()).map_err(|e| ReproError::run(run, e))?;
+    let status = meshvae::read_status(&folder).map_err(|e| ReproError::run(run, e))?;
     let train_seconds: f64 = log.iter().map(|r| r.seconds).sum();
     let mut levels = trained.hierarchy.vertex_counts();
     levels.truncate(model.pool_levels() + 1);
@@ -208,6 +218,9 @@ pub fn execute(
         train_seconds,
         other_seconds: (started.elapsed().as_secs_f64() - session_train).max(0.0),
         threads: Some(rayon::current_num_threads()),
+        stop_reason: status.as_ref().map(|s| s.stop_reason.to_string()),
+        steps: status.as_ref().map(|s| s.steps),
+        test_mean_distance_rigid: Some(report.test.mean_distance_rigid),
     };
     let path = run.result_path(records);
     if let Some(parent) = path.parent() {

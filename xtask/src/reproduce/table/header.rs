@@ -48,9 +48,9 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     );
     let _ = writeln!(
         md,
-        "- {} epochs per run (the authors' code runs 8000), batch 50, Adam with learning rate \
-         1e-3, the paper's network and loss as the authors' code runs them \
-         (`meshvae::ModelConfig::default()`, `TrainConfig::default()`), de-pooling by copy.",
+        "- {} epochs per run (the authors' code runs 8000), batch 50, Adam with a constant \
+         learning rate of 1e-3 and no early stop, the paper's network and loss as the authors' \
+         code runs them (`meshvae::ModelConfig::default()`), de-pooling by copy.",
         opts.epochs
     );
     let _ = writeln!(md, "- Protocol: {}.", opts.protocol.description);

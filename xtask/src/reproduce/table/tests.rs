@@ -30,6 +30,9 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         train_seconds: 1.0,
         other_seconds: 1.0,
         threads: None,
+        stop_reason: None,
+        steps: None,
+        test_mean_distance_rigid: None,
     }
 }
 
