@@ -232,6 +232,7 @@ mod tests {
                 rotation_max: 2.0,
                 scale_min: -0.5,
                 scale_max: 1.5,
+                clamp: None,
             }),
             names: vec!["a".into(), "b".into()],
             rest_positions: Some(vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.5]]),

@@ -4,6 +4,11 @@
 //!
 //! y = 1.9 (x − min)/(max − min) − 0.95, and back x = (max − min)(y + 0.95)/1.9 + min, both in
 //! f64 (results stored as f32).
+//!
+//! [`Normalization::fit_quantile`] fits each range between two quantiles instead, and clamps
+//! what lies beyond: a few outlying vertices (0.01 % of horse-gallop's stretch entries reach
+//! −9.8 and 18.8 while 99 % lie in [−0.2, 1.5]) otherwise squeeze every ordinary value into a
+//! few percent of the target range.
 
 use crate::error::FeatureError;
 use crate::features::{CHANNELS, FeatureSet, ROTATION_CHANNELS};
@@ -20,6 +25,9 @@ pub struct Normalization {
     pub rotation_max: f64,
     pub scale_min: f64,
     pub scale_max: f64,
+    /// Normalised values are clamped to ±this (set by [`Self::fit_quantile`]; absent = none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clamp: Option<f64>,
 }
 
 impl Normalization {
@@ -55,6 +63,50 @@ impl Normalization {
             rotation_max: r.1 + PADDING,
             scale_min: s.0 - PADDING,
             scale_max: s.1 + PADDING,
+            clamp: None,
+        })
+    }
+
+    /// Fits each group's range between its quantiles `q` and `1 − q` (0 ≤ q < 0.5; 0 is
+    /// [`Self::fit`]) and clamps normalised values to ±1, so that outliers map to the edge of
+    /// what a tanh output can reach instead of far beyond it.
+    pub fn fit_quantile<'a>(
+        sets: impl IntoIterator<Item = &'a FeatureSet>,
+        q: f64,
+    ) -> Result<Self, FeatureError> {
+        if !(0.0..0.5).contains(&q) {
+            return Err(FeatureError::input(
+                "quantile",
+                format!("{q} is not in [0, 0.5)"),
+            ));
+        }
+        let sets: Vec<&FeatureSet> = sets.into_iter().collect();
+        let full = Self::fit(sets.iter().copied())?;
+        if q == 0.0 {
+            return Ok(full);
+        }
+        let (mut r, mut s) = (Vec::new(), Vec::new());
+        for set in &sets {
+            for vertex in set.as_slice().chunks_exact(CHANNELS) {
+                r.extend_from_slice(&vertex[..ROTATION_CHANNELS]);
+                s.extend_from_slice(&vertex[ROTATION_CHANNELS..]);
+            }
+        }
+        let bounds = |v: &mut Vec<f32>| {
+            let pick = |v: &mut Vec<f32>, k: usize| *v.select_nth_unstable_by(k, f32::total_cmp).1;
+            let n = v.len();
+            let lo = ((q * n as f64).floor() as usize).min(n - 1);
+            let hi = (((1.0 - q) * n as f64).ceil() as usize).clamp(1, n) - 1;
+            (pick(v, lo) as f64 - PADDING, pick(v, hi) as f64 + PADDING)
+        };
+        let (rotation_min, rotation_max) = bounds(&mut r);
+        let (scale_min, scale_max) = bounds(&mut s);
+        Ok(Self {
+            rotation_min,
+            rotation_max,
+            scale_min,
+            scale_max,
+            clamp: Some(1.0),
         })
     }
 
@@ -81,8 +133,9 @@ impl Normalization {
 
     /// Raw features → [−0.95, 0.95] (values outside the fitted range map outside it).
     pub fn apply(&self, features: &FeatureSet) -> FeatureSet {
+        let limit = self.clamp.unwrap_or(f64::INFINITY);
         self.map(features, |x, lo, hi| {
-            2.0 * TARGET * (x - lo) / (hi - lo) - TARGET
+            (2.0 * TARGET * (x - lo) / (hi - lo) - TARGET).clamp(-limit, limit)
         })
     }
 
@@ -153,14 +206,62 @@ mod tests {
     }
 
     #[test]
+    fn quantile_ranges_ignore_outliers_and_clamp_them() {
+        // 1,000 vertices: rotations uniform in [−1, 1], stretches in [0.5, 1.5], and one vertex
+        // far out in both groups.
+        let mut values = Vec::new();
+        for i in 0..1000 {
+            let t = i as f32 / 999.0;
+            values.extend([2.0 * t - 1.0; 3]);
+            values.extend([0.5 + t; 6]);
+        }
+        values[..3].copy_from_slice(&[-40.0; 3]);
+        values[3..9].copy_from_slice(&[90.0; 6]);
+        let a = set(values);
+        let full = Normalization::fit([&a]).unwrap();
+        assert_eq!(full, Normalization::fit_quantile([&a], 0.0).unwrap());
+        assert!(full.scale_max > 89.0 && full.clamp.is_none());
+        let n = Normalization::fit_quantile([&a], 0.01).unwrap();
+        // The 1 % and 99 % quantiles of each group, by a sort.
+        let mut rot: Vec<f32> = a
+            .as_slice()
+            .chunks(9)
+            .flat_map(|v| v[..3].to_vec())
+            .collect();
+        rot.sort_by(f32::total_cmp);
+        assert_eq!(n.rotation_min, rot[30] as f64 - PADDING);
+        assert_eq!(n.rotation_max, rot[2969] as f64 + PADDING);
+        assert!(n.scale_max < 1.5 && n.scale_min > 0.5, "{n:?}");
+        let y = n.apply(&a);
+        let s = y.as_slice();
+        // The outliers sit at the clamp; ordinary values spread over the target range.
+        assert_eq!((s[0], s[3]), (-1.0, 1.0));
+        assert!(s.iter().all(|x| x.abs() <= 1.0));
+        let middle = &s[9 * 500..9 * 500 + 9];
+        assert!(middle.iter().all(|x| x.abs() < 0.05), "{middle:?}");
+        assert!(Normalization::fit_quantile([&a], 0.5).is_err());
+    }
+
+    #[test]
     fn json_round_trip_and_validation() {
         let n = Normalization {
             rotation_min: -3.5,
             rotation_max: 4.25,
             scale_min: -0.5,
             scale_max: 1.75,
+            clamp: None,
         };
         assert_eq!(Normalization::from_json(&n.to_json()).unwrap(), n);
+        // Older JSON has no clamp.
+        assert!(!n.to_json().contains("clamp"));
+        let clamped = Normalization {
+            clamp: Some(1.0),
+            ..n
+        };
+        assert_eq!(
+            Normalization::from_json(&clamped.to_json()).unwrap(),
+            clamped
+        );
         assert!(Normalization::from_json("{\"rotation_min\":1}").is_err());
         let bad = Normalization {
             rotation_max: -4.0,

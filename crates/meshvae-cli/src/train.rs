@@ -117,6 +117,10 @@ pub struct TrainArgs {
     /// (for comparisons: the test meshes then shape the model's inputs).
     #[arg(long)]
     normalize_on_all: bool,
+    /// Fit each feature group's range between the quantiles Q and 1 − Q (e.g. 0.001) and
+    /// clamp the outliers, instead of between min and max (the authors) [default: 0].
+    #[arg(long)]
+    normalize_quantile: Option<f64>,
     /// Continue the model in --out from its last checkpoint.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
@@ -242,6 +246,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         (None, None) => {}
     }
     train.normalize_on_all = base_train.normalize_on_all || args.normalize_on_all;
+    train.normalize_quantile = args
+        .normalize_quantile
+        .unwrap_or(base_train.normalize_quantile);
     if let Some(p) = args.patience {
         train.schedule.patience = p;
     }

@@ -25,6 +25,15 @@ pub struct MeshData {
     pub labels: Option<Vec<String>>,
 }
 
+/// How [`MeshData::prepare_fitted`] fits the normalisation.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct NormalizationFit {
+    /// On every mesh, test meshes included (the authors' code), instead of the training ones.
+    pub on_all: bool,
+    /// Range between the quantiles q and 1 − q, outliers clamped (0: min and max).
+    pub quantile: f64,
+}
+
 impl MeshData {
     /// Features of every mesh of `set` with a normalisation fitted on `split.train`.
     pub fn prepare(set: &MeshSet, split: Split, options: FeatureOptions) -> Result<Self> {
@@ -33,18 +42,24 @@ impl MeshData {
         Self::from_features(features.features, split, features.warnings)
     }
 
-    /// As [`Self::prepare`], but the normalisation is fitted on every mesh, test meshes
-    /// included, as the authors' code does (an A/B of that choice; the test meshes then
-    /// influence the model through the feature ranges).
-    pub fn prepare_normalized_on_all(
+    /// As [`Self::prepare`], with the normalisation fitted as `fit` says: on every mesh (test
+    /// meshes included, as the authors' code does; the test meshes then influence the model
+    /// through the feature ranges) or the training meshes, between quantiles or not.
+    pub fn prepare_fitted(
         set: &MeshSet,
         split: Split,
         options: FeatureOptions,
+        fit: NormalizationFit,
     ) -> Result<Self> {
         let extractor = FeatureExtractor::for_set(set, options)?;
         let features = extractor.extract(set)?;
         split.check(features.features.frames())?;
-        let normalization = Normalization::fit([&features.features])?;
+        let normalization = if fit.on_all {
+            Normalization::fit_quantile([&features.features], fit.quantile)?
+        } else {
+            let train = features.features.subset(&split.train)?;
+            Normalization::fit_quantile([&train], fit.quantile)?
+        };
         Ok(Self::with_normalization(
             features.features,
             split,
@@ -202,8 +217,12 @@ mod tests {
         assert!(data.batch(&[99], &Device::Cpu).is_err());
 
         // The authors' choice, on request: fitted on every mesh, so the whole set reaches ±0.95.
-        let all =
-            MeshData::prepare_normalized_on_all(&set, split, FeatureOptions::default()).unwrap();
+        let on_all = NormalizationFit {
+            on_all: true,
+            quantile: 0.0,
+        };
+        let all = MeshData::prepare_fitted(&set, split.clone(), FeatureOptions::default(), on_all)
+            .unwrap();
         assert_eq!(all.normalization, Normalization::fit([&raw]).unwrap());
         assert_ne!(all.normalization, on_train);
         let extreme = all
@@ -212,5 +231,23 @@ mod tests {
             .iter()
             .fold(0f32, |m, x| m.max(x.abs()));
         assert!((extreme - 0.95).abs() < 1e-3, "{extreme}");
+        // Between quantiles, on the training meshes: outliers clamped to ±1.
+        let robust = NormalizationFit {
+            on_all: false,
+            quantile: 0.01,
+        };
+        let q = MeshData::prepare_fitted(&set, split.clone(), FeatureOptions::default(), robust)
+            .unwrap();
+        let train_raw = raw.subset(&split.train).unwrap();
+        assert_eq!(
+            q.normalization,
+            Normalization::fit_quantile([&train_raw], 0.01).unwrap()
+        );
+        let extreme = q
+            .normalized
+            .as_slice()
+            .iter()
+            .fold(0f32, |m, x| m.max(x.abs()));
+        assert_eq!(extreme, 1.0);
     }
 }

@@ -73,6 +73,14 @@ pub struct TrainConfig {
     /// model's inputs.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub normalize_on_all: bool,
+    /// Fit each feature group's range between the quantiles q and 1 − q and clamp the
+    /// outliers (0: between min and max, as the authors).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub normalize_quantile: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// The step budget of a run given no budget: long enough for every set measured to converge
@@ -94,6 +102,7 @@ impl Default for TrainConfig {
             split_by_shape: true,
             schedule: Schedule::default(),
             normalize_on_all: false,
+            normalize_quantile: 0.0,
         }
     }
 }
@@ -115,6 +124,12 @@ impl TrainConfig {
             return Err(VaeError::argument("steps", "must be at least 1"));
         }
         self.schedule.validate()?;
+        if !(0.0..0.5).contains(&self.normalize_quantile) {
+            return Err(VaeError::argument(
+                "normalize_quantile",
+                format!("{} is not in [0, 0.5)", self.normalize_quantile),
+            ));
+        }
         if self.batch == 0 {
             return Err(VaeError::argument("batch", "must be at least 1"));
         }

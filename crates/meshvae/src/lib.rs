@@ -84,7 +84,7 @@ pub use adam::{Adam, AdamConfig};
 pub use batch_norm::BatchNorm;
 pub use checkpoint::{Checkpoint, Progress};
 pub use config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
-pub use data::{MeshData, denormalize};
+pub use data::{MeshData, NormalizationFit, denormalize};
 pub use embed::{
     EmbedOptions, Embedding, LoopMeasure, MIN_EMBED_MESHES, embed, largest_variance_dims,
     loop_measure,

@@ -3,7 +3,7 @@
 
 use super::EpochRecord;
 use crate::config::ModelConfig;
-use crate::data::MeshData;
+use crate::data::{MeshData, NormalizationFit};
 use crate::error::{Result, VaeError};
 use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, VERSION};
 use crate::schedule::StopReason;
@@ -43,11 +43,11 @@ pub(super) fn fresh_setup(
     prepare_out_dir(folder, force)?;
     let template = set.template();
     let hierarchy = Hierarchy::build(&template, &hierarchy_config)?;
-    let mut data = if train.normalize_on_all {
-        MeshData::prepare_normalized_on_all(set, split, request.features)?
-    } else {
-        MeshData::prepare(set, split, request.features)?
+    let fit = NormalizationFit {
+        on_all: train.normalize_on_all,
+        quantile: train.normalize_quantile,
     };
+    let mut data = MeshData::prepare_fitted(set, split, request.features, fit)?;
     if let Some(labels) = &labels {
         data = data.with_labels(labels.clone())?;
     }
@@ -171,6 +171,7 @@ pub(super) fn resume_setup(
         a.split_by_shape,
         a.schedule,
         a.normalize_on_all,
+        a.normalize_quantile,
     ) != (
         b.batch,
         b.lr,
@@ -181,6 +182,7 @@ pub(super) fn resume_setup(
         b.split_by_shape,
         b.schedule,
         b.normalize_on_all,
+        b.normalize_quantile,
     ) {
         differences.push("training settings other than the budget");
     }
