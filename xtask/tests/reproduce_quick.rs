@@ -1,6 +1,7 @@
 //! `cargo xtask reproduce --quick` end to end, into a temporary folder (never docs/): every run
 //! trains and is evaluated, the markdown has every table, column and data set with finite
-//! numbers, and a second invocation reuses the finished runs and resumes an unfinished one.
+//! numbers, and a second invocation reuses the finished runs and resumes an unfinished one;
+//! the converged plan (`--converged`) keeps its runs apart and resumes by their `run.json`.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -30,10 +31,16 @@ fn reproduce_with(work: &Path, results: &Path, extra: &[&str]) -> Output {
 }
 
 fn result(work: &Path, dataset: &str, column: &str) -> RunResult {
+    result_in(work, dataset, "e2", column)
+}
+
+/// The record of `column`, seed 1, in the plan folder `budget` (`e2`, `converged-s4`).
+fn result_in(work: &Path, dataset: &str, budget: &str, column: &str) -> RunResult {
     let path = work
         .join(dataset)
         .join(PROTOCOLS[0].id)
-        .join("e2/seed1")
+        .join(budget)
+        .join("seed1")
         .join(format!("{column}.result.json"));
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
     serde_json::from_str(&text).unwrap()
@@ -224,6 +231,56 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     assert!(!elsewhere.exists());
     let md = std::fs::read_to_string(dir.join("elsewhere.md")).unwrap();
     assert!(!md.contains("| not run |"), "{md}");
+
+    // The converged plan (`--quick`: a 4-step budget, far from converging) in the same work
+    // folder: its own runs under converged-s4/, none of the 2-epoch runs reused.
+    let converged = ["--dataset", "synthetic", "--converged"];
+    let out = reproduce_with(&work, &dir.join("converged.md"), &converged);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(&format!("{runs} runs (0 reused)")),
+        "{stdout}"
+    );
+    for column in COLUMNS {
+        let r = result_in(&work, "synthetic", "converged-s4", column.id);
+        assert!(r.is_finite(), "{}", column.id);
+        assert_eq!(r.step_budget, Some(4));
+        assert_eq!(r.stop_reason.as_deref(), Some("budget"));
+        // 7 training meshes: one step per epoch.
+        assert_eq!((r.steps, r.epochs), (Some(4), 4), "{}", column.id);
+    }
+    let md = std::fs::read_to_string(dir.join("converged.md")).unwrap();
+    assert!(
+        md.contains("- Every run trained until the validation loss converged (learning rate"),
+        "{md}"
+    );
+    assert!(md.contains("budget 4 steps)"), "{md}");
+    assert!(
+        md.contains(&format!(
+            "- How the runs stopped: synthetic 0 converged, {runs} at the step budget, mean 4 \
+             steps (4 to 4)."
+        )),
+        "{md}"
+    );
+    assert!(!md.contains("| not run |"), "{md}");
+    // A converged-plan run whose result is lost is only evaluated again: run.json says it
+    // ended (on its budget), so it is not trained further.
+    let seed_dir = work.join("synthetic/validation/converged-s4/seed1");
+    let log = std::fs::read_to_string(seed_dir.join("ours/log.jsonl")).unwrap();
+    let ours = result_in(&work, "synthetic", "converged-s4", "ours");
+    std::fs::remove_file(seed_dir.join("ours.result.json")).unwrap();
+    let again = reproduce_with(&work, &dir.join("converged.md"), &converged);
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(
+        stdout.contains(&format!("{runs} runs ({} reused)", runs - 1)),
+        "{stdout}"
+    );
+    let again = result_in(&work, "synthetic", "converged-s4", "ours");
+    assert_eq!((again.test_rms, again.epochs), (ours.test_rms, ours.epochs));
+    assert_eq!(
+        std::fs::read_to_string(seed_dir.join("ours/log.jsonl")).unwrap(),
+        log
+    );
 }
 
 #[test]
@@ -231,6 +288,7 @@ fn bad_arguments_are_errors_that_name_the_argument() {
     for (args, named) in [
         (&["--jobs", "0"][..], "--jobs"),
         (&["--epochs", "0"][..], "--epochs"),
+        (&["--epochs", "5", "--converged"][..], "--converged"),
         (&["--seeds", "0"][..], "--seeds"),
         (&["--dataset", "swing"][..], "--dataset"),
         (&["--protocol", "nope"][..], "--protocol"),

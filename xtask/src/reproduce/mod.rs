@@ -8,9 +8,11 @@
 //! - [`params`]: parameter counts (ours by the paper's formula, Tan et al.'s derived);
 //! - [`paper`]: the paper's numbers.
 //!
-//! Every run is a model folder under the work folder; a finished run leaves
-//! `<column>.result.json` beside it and is skipped next time, an unfinished one is resumed from
-//! its checkpoint, so an interrupted `reproduce` continues where it stopped.
+//! Every run is a model folder under the work folder,
+//! `<data set>/<protocol>/<budget>/seed<N>/<column>` with the budget `e<epochs>` (a fixed number
+//! of epochs) or `converged` (`--converged`: until the validation loss converges); a finished
+//! run leaves `<column>.result.json` beside it and is skipped next time, an unfinished one is
+//! resumed from its checkpoint, so an interrupted `reproduce` continues where it stopped.
 
 pub mod paper;
 pub mod params;
@@ -22,7 +24,7 @@ pub mod table;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mesh_io::MeshSet;
 use mesh_io::synth::SynthConfig;
-use plan::{Dataset, Protocol, Run, Source};
+use plan::{Budget, Dataset, Protocol, Run, Source};
 use run::RunResult;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -64,7 +66,8 @@ impl ReproError {
 #[derive(Debug, Clone)]
 pub struct Options {
     pub datasets: Vec<&'static Dataset>,
-    pub epochs: usize,
+    /// How long every run trains: a fixed number of epochs, or until converged.
+    pub budget: Budget,
     /// Seeds 1..=seeds; each draws its own split.
     pub seeds: u64,
     /// Small synthetic set, one checkpoint per run.
@@ -102,10 +105,16 @@ impl Options {
 
     /// Checks the numbers.
     pub fn validate(&self) -> Result<(), ReproError> {
-        if self.epochs == 0 {
+        if self.budget == Budget::Epochs(0) {
             return Err(ReproError::Argument {
                 arg: "--epochs",
                 message: "must be at least 1".into(),
+            });
+        }
+        if self.budget == (Budget::Converged { max_steps: 0 }) {
+            return Err(ReproError::Argument {
+                arg: "--converged",
+                message: "the step budget must be at least 1".into(),
             });
         }
         if self.seeds == 0 {
@@ -248,7 +257,7 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     let runs = plan::runs(
         &options.datasets,
         options.protocol,
-        options.epochs,
+        options.budget,
         &seeds,
         options.by_shape,
     );
@@ -386,9 +395,15 @@ impl Trainer<'_> {
         Ok(done.into_iter().map(|(_, result)| result).collect())
     }
 
-    /// One run, with its own epoch bar.
+    /// One run, with its own epoch bar. A converged-plan run's bar is as long as its budget in
+    /// epochs once its first epoch tells how many steps an epoch takes (the step budget, an
+    /// upper bound, until then); the run usually stops before its end.
     fn train(&self, run: &Run) -> Result<RunResult, ReproError> {
-        let bar = self.multi.add(ProgressBar::new(run.epochs as u64));
+        let length = match run.budget {
+            Budget::Epochs(epochs) => epochs,
+            Budget::Converged { max_steps } => max_steps,
+        };
+        let bar = self.multi.add(ProgressBar::new(length as u64));
         if let Ok(style) =
             ProgressStyle::with_template("epochs {bar:30} {pos}/{len}  {msg}  [{eta_precise} left]")
         {
@@ -403,7 +418,16 @@ impl Trainer<'_> {
             &self.options.work,
             self.options.records(),
             checkpoint_seconds,
-            |epoch| bar.set_position(epoch as u64),
+            |record| {
+                if let Some(max_steps) = run.budget.max_steps()
+                    && record.epoch > 0
+                    && record.step > 0
+                {
+                    let steps_per_epoch = (record.step as usize).div_ceil(record.epoch);
+                    bar.set_length(max_steps.div_ceil(steps_per_epoch) as u64);
+                }
+                bar.set_position(record.epoch as u64);
+            },
         );
         bar.finish_and_clear();
         self.multi.remove(&bar);

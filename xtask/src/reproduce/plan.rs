@@ -1,11 +1,13 @@
 //! The run table: data sets, columns (network variants) and protocols, and the runs they make.
 //!
 //! A column or a protocol is one entry of [`COLUMNS`] or [`PROTOCOLS`]: the tables, the folder
-//! names and the markdown follow from the entries. A run is one (data set, protocol, epochs,
-//! seed, column); each seed draws its own random half/half split.
+//! names and the markdown follow from the entries. A run is one (data set, protocol, budget,
+//! seed, column); each seed draws its own random half/half split. The budget is the plan: a
+//! fixed number of epochs at the authors' constant rate, or `meshvae train`'s default training
+//! until the validation loss converges ([`Budget`]).
 
 use super::paper::AblationColumn;
-use meshvae::{ConvKind, ModelConfig, PoolKind, Structure, TrainConfig};
+use meshvae::{ConvKind, DEFAULT_MAX_STEPS, ModelConfig, PoolKind, Structure, TrainConfig};
 use std::path::{Path, PathBuf};
 
 /// Which of the paper's tables a column belongs to.
@@ -240,12 +242,57 @@ pub fn dataset(name: &str) -> Option<&'static Dataset> {
     DATASETS.iter().find(|d| d.name == name)
 }
 
+/// How long every run of a plan trains, and how.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Budget {
+    /// Exactly this many epochs at the authors' constant learning rate of 1e-3, without early
+    /// stop: how every run recorded under `docs/runs/<set>/<protocol>/e600` trained.
+    Epochs(usize),
+    /// `meshvae train`'s default training (`TrainConfig::default()`'s learning rate and
+    /// schedule): until the validation loss converges, or at most `max_steps` optimizer steps
+    /// ([`DEFAULT_MAX_STEPS`], as `meshvae train` given no budget; `--quick` uses fewer).
+    Converged { max_steps: usize },
+}
+
+impl Budget {
+    /// The converged plan with `meshvae train`'s step budget.
+    pub const CONVERGED: Self = Self::Converged {
+        max_steps: DEFAULT_MAX_STEPS,
+    };
+
+    /// The folder of the plan's runs: `e<epochs>`, `converged`, or `converged-s<max steps>`
+    /// for a step budget other than [`DEFAULT_MAX_STEPS`].
+    pub fn dir_name(&self) -> String {
+        match *self {
+            Self::Epochs(epochs) => format!("e{epochs}"),
+            Self::Converged { max_steps } if max_steps == DEFAULT_MAX_STEPS => "converged".into(),
+            Self::Converged { max_steps } => format!("converged-s{max_steps}"),
+        }
+    }
+
+    /// The fixed number of epochs, if the plan has one.
+    pub fn epochs(&self) -> Option<usize> {
+        match *self {
+            Self::Epochs(epochs) => Some(epochs),
+            Self::Converged { .. } => None,
+        }
+    }
+
+    /// The step budget of the converged plan.
+    pub fn max_steps(&self) -> Option<usize> {
+        match *self {
+            Self::Epochs(_) => None,
+            Self::Converged { max_steps } => Some(max_steps),
+        }
+    }
+}
+
 /// One training run.
 #[derive(Debug, Clone, Copy)]
 pub struct Run {
     pub dataset: &'static Dataset,
     pub protocol: &'static Protocol,
-    pub epochs: usize,
+    pub budget: Budget,
     pub seed: u64,
     pub column: &'static Column,
     /// Test and validation meshes drawn by shape (`TrainConfig::split_by_shape`), so copies
@@ -254,13 +301,14 @@ pub struct Run {
 }
 
 impl Run {
-    /// `WORK/<data set>/<protocol>/e<epochs>/seed<seed>`: the runs sharing a split
-    /// (`e<epochs>-by-mesh` for splits drawn mesh by mesh).
+    /// `WORK/<data set>/<protocol>/<budget>/seed<seed>`, the budget `e<epochs>` or `converged`
+    /// ([`Budget::dir_name`]): the runs sharing a split (`e<epochs>-by-mesh`,
+    /// `converged-by-mesh` for splits drawn mesh by mesh).
     pub fn seed_dir(&self, work: &Path) -> PathBuf {
         let split = if self.by_shape { "" } else { "-by-mesh" };
         work.join(self.dataset.name)
             .join(self.protocol.id)
-            .join(format!("e{}{split}", self.epochs))
+            .join(format!("{}{split}", self.budget.dir_name()))
             .join(format!("seed{}", self.seed))
     }
 
@@ -275,18 +323,25 @@ impl Run {
             .join(format!("{}.result.json", self.column.id))
     }
 
-    /// The training settings: the paper's defaults, this run's epochs and seed, the protocol.
-    /// A constant learning rate of 1e-3 (the authors') for exactly `epochs` epochs, as every
-    /// recorded run so far trained (runs to convergence, with the default schedule, are the next plan's).
+    /// The training settings: the paper's defaults, this run's budget and seed, the protocol.
+    /// A fixed number of epochs trains at a constant learning rate of 1e-3 (the authors'), as
+    /// every run recorded before the converged plan; the converged plan trains as `meshvae
+    /// train` does given no budget (default rate and schedule, at most `max_steps` steps).
     pub fn train_config(&self) -> TrainConfig {
-        let mut train = TrainConfig {
-            epochs: self.epochs,
-            seed: self.seed,
-            split_by_shape: self.by_shape,
-            schedule: meshvae::Schedule::constant(),
-            lr: 1e-3,
-            ..TrainConfig::default()
+        let mut train = match self.budget {
+            Budget::Epochs(epochs) => TrainConfig {
+                epochs,
+                schedule: meshvae::Schedule::constant(),
+                lr: 1e-3,
+                ..TrainConfig::default()
+            },
+            Budget::Converged { max_steps } => TrainConfig {
+                steps: Some(max_steps),
+                ..TrainConfig::default()
+            },
         };
+        train.seed = self.seed;
+        train.split_by_shape = self.by_shape;
         (self.protocol.configure)(&mut train);
         train
     }
@@ -304,7 +359,7 @@ impl Run {
 pub fn runs(
     datasets: &[&'static Dataset],
     protocol: &'static Protocol,
-    epochs: usize,
+    budget: Budget,
     seeds: &[u64],
     by_shape: bool,
 ) -> Vec<Run> {
@@ -315,7 +370,7 @@ pub fn runs(
                 out.push(Run {
                     dataset,
                     protocol,
-                    epochs,
+                    budget,
                     seed,
                     column,
                     by_shape,
@@ -352,7 +407,7 @@ mod tests {
         let horse = dataset("horse-gallop").unwrap();
         let synth = dataset("synthetic").unwrap();
         let protocol = &PROTOCOLS[0];
-        let runs = runs(&[synth, horse], protocol, 20, &[1, 2], true);
+        let runs = runs(&[synth, horse], protocol, Budget::Epochs(20), &[1, 2], true);
         assert_eq!(runs.len(), 2 * 2 * COLUMNS.len());
         assert_eq!(runs[0].dataset.name, "synthetic");
         assert_eq!(runs.last().unwrap().seed, 2);
@@ -384,5 +439,59 @@ mod tests {
         let mut t = TrainConfig::default();
         (authors.configure)(&mut t);
         assert_eq!(t.val_fraction, 0.0);
+    }
+
+    #[test]
+    fn the_epoch_plan_trains_at_a_constant_rate_and_the_converged_plan_as_meshvae_train() {
+        let synth = dataset("synthetic").unwrap();
+        let work = Path::new("/w");
+        let fixed = runs(&[synth], &PROTOCOLS[0], Budget::Epochs(600), &[3], true)[0];
+        let train = fixed.train_config();
+        assert_eq!((train.epochs, train.steps, train.lr), (600, None, 1e-3));
+        assert_eq!(train.schedule, meshvae::Schedule::constant());
+        assert_eq!(fixed.budget.epochs(), Some(600));
+
+        let converged = Run {
+            budget: Budget::CONVERGED,
+            ..fixed
+        };
+        assert_eq!(converged.budget.dir_name(), "converged");
+        assert_eq!(
+            converged.model_dir(work),
+            Path::new("/w/synthetic/validation/converged/seed3/spatial")
+        );
+        assert_eq!(
+            converged.result_path(work),
+            Path::new("/w/synthetic/validation/converged/seed3/spatial.result.json")
+        );
+        let by_mesh = Run {
+            by_shape: false,
+            ..converged
+        };
+        assert_eq!(
+            by_mesh.model_dir(work),
+            Path::new("/w/synthetic/validation/converged-by-mesh/seed3/spatial")
+        );
+        // `meshvae train`'s default training: its rate and schedule, its step budget; the
+        // seed, split and protocol as in the epoch plan.
+        let train = converged.train_config();
+        let default = TrainConfig::default();
+        assert_eq!(train.steps, Some(DEFAULT_MAX_STEPS));
+        assert_eq!(train.schedule, meshvae::Schedule::default());
+        assert!(train.schedule.stops_early());
+        assert_eq!(train.lr, default.lr);
+        assert_eq!((train.seed, train.val_fraction), (3, 0.1));
+        assert!(train.split_by_shape && !by_mesh.train_config().split_by_shape);
+        train.validate().unwrap();
+        assert_eq!(converged.budget.epochs(), None);
+        assert_eq!(converged.budget.max_steps(), Some(DEFAULT_MAX_STEPS));
+        // Another step budget (`--quick`) has a folder of its own.
+        let short = Budget::Converged { max_steps: 4 };
+        assert_eq!(short.dir_name(), "converged-s4");
+        let quick = Run {
+            budget: short,
+            ..converged
+        };
+        assert_eq!(quick.train_config().steps, Some(4));
     }
 }

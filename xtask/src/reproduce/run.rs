@@ -2,10 +2,12 @@
 //! numbers in a small JSON beside the model folder. A run whose JSON exists is not repeated.
 
 use super::ReproError;
-use super::plan::Run;
+use super::plan::{Budget, Run};
 use candle_core::Device;
 use mesh_io::MeshSet;
-use meshvae::{ModelConfig, ModelFolder, TrainOptions, TrainRequest, TrainedModel};
+use meshvae::{
+    EpochRecord, ModelConfig, ModelFolder, StopReason, TrainOptions, TrainRequest, TrainedModel,
+};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -17,7 +19,14 @@ pub struct RunResult {
     pub protocol: String,
     pub column: String,
     pub seed: u64,
+    /// The plan's epochs; in the converged plan, the epochs the run took.
     pub epochs: usize,
+    /// The converged plan's step budget: the run trained with `meshvae train`'s default rate
+    /// and schedule until converged or this many steps (`Budget::Converged`). Absent from
+    /// fixed-epoch runs (every result written before the converged plan), whose `epochs` is
+    /// their budget.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_budget: Option<usize>,
     pub model: ModelConfig,
     /// Vertex count of every hierarchy level the network uses (template first).
     pub levels: Vec<usize>,
@@ -72,16 +81,29 @@ pub struct RunResult {
 }
 
 impl RunResult {
+    /// The plan the run belongs to.
+    pub fn budget(&self) -> Budget {
+        match self.step_budget {
+            Some(max_steps) => Budget::Converged { max_steps },
+            None => Budget::Epochs(self.epochs),
+        }
+    }
+
     /// Whether this result was produced by `run` (same data set, protocol, column, seed,
-    /// epochs, kind of split and network).
+    /// budget, kind of split and network).
     pub fn matches(&self, run: &Run, model: &ModelConfig) -> bool {
         self.dataset == run.dataset.name
             && self.protocol == run.protocol.id
             && self.column == run.column.id
             && self.seed == run.seed
-            && self.epochs == run.epochs
+            && self.budget() == run.budget
             && self.split_by_shape == run.by_shape
             && &self.model == model
+    }
+
+    /// Whether the run stopped because its validation loss converged.
+    pub fn converged(&self) -> bool {
+        self.stop_reason.as_deref() == Some(StopReason::Converged.as_str())
     }
 
     /// Every number finite (a diverged run would not be).
@@ -122,7 +144,7 @@ pub fn execute(
     work: &Path,
     records: &Path,
     checkpoint_seconds: f64,
-    mut on_epoch: impl FnMut(usize),
+    mut on_epoch: impl FnMut(&EpochRecord),
 ) -> Result<RunResult, ReproError> {
     let started = Instant::now();
     let out = run.model_dir(work);
@@ -151,10 +173,10 @@ pub fn execute(
     let mut session_train = 0.0;
     // A run whose training finished but whose result was lost (or deleted) is only evaluated
     // again: its checkpoint was dropped when the result was first written.
-    if !(resume && training_finished(&folder, run.epochs)?) {
+    if !(resume && training_finished(&folder, run.budget)?) {
         meshvae::train(&request, &options, |record| {
             session_train += record.seconds;
-            on_epoch(record.epoch);
+            on_epoch(record);
         })
         .map_err(|e| ReproError::run(run, e))?;
     }
@@ -167,7 +189,7 @@ pub fn execute(
     let report = trained
         .evaluate(set, &device)
         .map_err(|e| ReproError::run(run, e))?;
-    let (_, best_epoch) = trained
+    let (epochs_run, best_epoch) = trained
         .epochs_trained()
         .map_err(|e| ReproError::run(run, e))?;
     let (test_rms_selected_on_test, best_epoch_on_test) =
@@ -197,7 +219,8 @@ pub fn execute(
         protocol: run.protocol.id.into(),
         column: run.column.id.into(),
         seed: run.seed,
-        epochs: run.epochs,
+        epochs: run.budget.epochs().unwrap_or(epochs_run),
+        step_budget: run.budget.max_steps(),
         model,
         levels,
         test_meshes: report.test.meshes,
@@ -246,15 +269,146 @@ pub fn execute(
     Ok(result)
 }
 
-/// Whether the folder's log reaches the last epoch and its selected weights were written.
-fn training_finished(folder: &ModelFolder, epochs: usize) -> Result<bool, ReproError> {
-    let path = folder.log();
-    if !path.is_file() || !folder.weights().is_file() {
+/// Whether the run's training is over and its selected weights were written: a fixed-epoch
+/// run's log reaches its last epoch; a converged-plan run's `run.json` says it converged or used
+/// its budget (`interrupted` while it trains, and after a kill).
+fn training_finished(folder: &ModelFolder, budget: Budget) -> Result<bool, ReproError> {
+    if !folder.weights().is_file() {
         return Ok(false);
     }
-    let log = meshvae::read_log(&path).map_err(|e| ReproError::Results {
-        path: path.clone(),
-        message: e.to_string(),
-    })?;
-    Ok(log.last().is_some_and(|r| r.epoch == epochs))
+    match budget {
+        Budget::Epochs(epochs) => {
+            let path = folder.log();
+            if !path.is_file() {
+                return Ok(false);
+            }
+            let log = meshvae::read_log(&path).map_err(|e| ReproError::Results {
+                path: path.clone(),
+                message: e.to_string(),
+            })?;
+            Ok(log.last().is_some_and(|r| r.epoch == epochs))
+        }
+        Budget::Converged { .. } => {
+            let status = meshvae::read_status(folder).map_err(|e| ReproError::Results {
+                path: folder.status(),
+                message: e.to_string(),
+            })?;
+            Ok(status.is_some_and(|s| {
+                matches!(s.stop_reason, StopReason::Converged | StopReason::Budget)
+            }))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reproduce::plan::{self, COLUMNS, PROTOCOLS};
+    use meshvae::{DEFAULT_MAX_STEPS, RunStatus, Selection};
+
+    /// A record of the 600-epoch plan as committed (written before the converged plan).
+    const OLD_RECORD: &str =
+        include_str!("../../../docs/runs/horse-gallop/validation/e600/seed1/ours.result.json");
+
+    fn run(budget: Budget) -> Run {
+        Run {
+            dataset: plan::dataset("horse-gallop").unwrap(),
+            protocol: &PROTOCOLS[0],
+            budget,
+            seed: 1,
+            column: COLUMNS.iter().find(|c| c.is_ours()).unwrap(),
+            by_shape: true,
+        }
+    }
+
+    fn matches(result: &RunResult, run: &Run) -> bool {
+        result.matches(run, &run.column.model().unwrap())
+    }
+
+    #[test]
+    fn old_records_match_their_fixed_epoch_runs_only() {
+        let old: RunResult = serde_json::from_str(OLD_RECORD).unwrap();
+        assert_eq!((old.epochs, old.step_budget), (600, None));
+        assert_eq!(old.budget(), Budget::Epochs(600));
+        assert!(matches(&old, &run(Budget::Epochs(600))));
+        assert!(!matches(&old, &run(Budget::Epochs(601))));
+        assert!(!matches(&old, &run(Budget::CONVERGED)));
+        assert!(!old.converged());
+        // Written back, it stays a fixed-epoch record.
+        let value = serde_json::to_value(&old).unwrap();
+        assert!(value.get("step_budget").is_none(), "{value}");
+        assert_eq!(serde_json::from_value::<RunResult>(value).unwrap(), old);
+    }
+
+    #[test]
+    fn converged_records_match_converged_runs_only() {
+        let mut converged: RunResult = serde_json::from_str(OLD_RECORD).unwrap();
+        converged.step_budget = Some(DEFAULT_MAX_STEPS);
+        converged.stop_reason = Some("converged".into());
+        converged.steps = Some(5400);
+        // Even a converged run that took exactly 600 epochs is not a run of the 600-epoch plan.
+        for epochs in [600, 1234] {
+            converged.epochs = epochs;
+            assert_eq!(converged.budget(), Budget::CONVERGED);
+            assert!(matches(&converged, &run(Budget::CONVERGED)));
+            assert!(!matches(&converged, &run(Budget::Epochs(600))));
+            assert!(!matches(
+                &converged,
+                &run(Budget::Converged { max_steps: 4 })
+            ));
+        }
+        assert!(converged.converged());
+        let text = serde_json::to_string(&converged).unwrap();
+        assert!(text.contains("\"step_budget\":20000"), "{text}");
+        let back: RunResult = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, converged);
+        assert!(matches(&back, &run(Budget::CONVERGED)));
+    }
+
+    #[test]
+    fn a_converged_run_is_finished_when_run_json_says_converged_or_budget() {
+        let dir =
+            std::env::temp_dir().join(format!("xtask-training-finished-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let folder = ModelFolder::new(&dir);
+        let finished = |budget| training_finished(&folder, budget).unwrap();
+        // Two epochs logged, no weights yet: nothing is finished.
+        let line = |epoch: usize| {
+            format!(
+                "{{\"epoch\":{epoch},\"train_loss\":1.0,\"rec\":1.0,\"kl\":0.0,\"l2\":0.0,\
+                 \"test_loss\":null,\"seconds\":0.1,\"step\":{epoch}}}\n"
+            )
+        };
+        std::fs::write(folder.log(), line(1) + &line(2)).unwrap();
+        assert!(!finished(Budget::Epochs(2)) && !finished(Budget::CONVERGED));
+        std::fs::write(folder.weights(), b"").unwrap();
+        // A fixed-epoch run goes by its log, a converged one by run.json.
+        assert!(finished(Budget::Epochs(2)) && !finished(Budget::Epochs(3)));
+        assert!(!finished(Budget::CONVERGED), "no run.json");
+        let mut status = RunStatus {
+            stop_reason: StopReason::Interrupted,
+            epochs: 2,
+            epoch_budget: 20_000,
+            steps: 2,
+            steps_per_epoch: 1,
+            best_epoch: 2,
+            selected_on: Selection::Validation,
+            still_improving: true,
+            lr: 1e-2,
+            lr_cuts: 0,
+            seconds: 0.2,
+            path: "engine".into(),
+        };
+        for (reason, done) in [
+            (StopReason::Interrupted, false),
+            (StopReason::Budget, true),
+            (StopReason::Converged, true),
+        ] {
+            status.stop_reason = reason;
+            std::fs::write(folder.status(), serde_json::to_string(&status).unwrap()).unwrap();
+            assert_eq!(finished(Budget::CONVERGED), done, "{reason}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

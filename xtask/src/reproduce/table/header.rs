@@ -2,18 +2,23 @@
 //! machine and time.
 
 use crate::reproduce::Outcome;
-use crate::reproduce::stats::{sig, thousands};
+use crate::reproduce::plan::Budget;
+use crate::reproduce::run::RunResult;
+use crate::reproduce::stats::{Stat, sig, thousands};
+use meshvae::{Schedule, TrainConfig};
 use std::fmt::Write;
 
 pub(super) fn header(md: &mut String, o: &Outcome) {
     let opts = &o.options;
     let seeds: Vec<String> = (1..=opts.seeds).map(|s| s.to_string()).collect();
+    // `+ 0.0`: an empty sum is -0.0, which would print as "-0.0 min".
     let compute: f64 = o
         .results
         .iter()
         .map(|r| r.train_seconds + r.other_seconds)
-        .sum();
-    let training: f64 = o.results.iter().map(|r| r.train_seconds).sum();
+        .sum::<f64>()
+        + 0.0;
+    let training: f64 = o.results.iter().map(|r| r.train_seconds).sum::<f64>() + 0.0;
     let _ = writeln!(md, "## How these numbers were made\n");
     let _ = writeln!(md, "- Command: `{}`", opts.command);
     for set in &o.sets {
@@ -46,13 +51,28 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
          training's shuffles and noise.",
         seeds.join(", ")
     );
-    let _ = writeln!(
-        md,
-        "- {} epochs per run (the authors' code runs 8000), batch 50, Adam with a constant \
-         learning rate of 1e-3 and no early stop, the paper's network and loss as the authors' \
-         code runs them (`meshvae::ModelConfig::default()`), de-pooling by copy.",
-        opts.epochs
-    );
+    match opts.budget {
+        Budget::Epochs(epochs) => {
+            let _ = writeln!(
+                md,
+                "- {epochs} epochs per run (the authors' code runs 8000), batch 50, Adam with a \
+                 constant learning rate of 1e-3 and no early stop, the paper's network and loss \
+                 as the authors' code runs them (`meshvae::ModelConfig::default()`), de-pooling \
+                 by copy."
+            );
+        }
+        Budget::Converged { max_steps } => {
+            let _ = writeln!(
+                md,
+                "- Every run trained until the validation loss converged ({}), as `meshvae \
+                 train` does by default (`TrainConfig::default()`), batch 50, Adam, the paper's \
+                 network and loss as the authors' code runs them \
+                 (`meshvae::ModelConfig::default()`), de-pooling by copy.",
+                converged_training(max_steps)
+            );
+            stops(md, o);
+        }
+    }
     let _ = writeln!(md, "- Protocol: {}.", opts.protocol.description);
     let _ = writeln!(
         md,
@@ -87,10 +107,10 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     if let Some(records) = &opts.records {
         let _ = writeln!(
             md,
-            "- Every run's numbers: `{}/<data set>/{}/e{}{}/seed<N>/<column>.result.json`.",
+            "- Every run's numbers: `{}/<data set>/{}/{}{}/seed<N>/<column>.result.json`.",
             records.display(),
             opts.protocol.id,
-            opts.epochs,
+            opts.budget.dir_name(),
             if opts.by_shape { "" } else { "-by-mesh" }
         );
     }
@@ -108,6 +128,72 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     );
 }
 
+/// "learning rate 1e-2 halved on plateaus, stop after 1,500 steps without a new best; budget
+/// 20,000 steps": `meshvae train`'s default training, from its settings.
+pub(super) fn converged_training(max_steps: usize) -> String {
+    let train = TrainConfig::default();
+    let schedule = Schedule::default();
+    let cut = if schedule.lr_factor == 0.5 {
+        "halved".to_string()
+    } else {
+        format!("multiplied by {}", schedule.lr_factor)
+    };
+    format!(
+        "learning rate {:e} {cut} on plateaus, stop after {} steps without a new best; budget {} \
+         steps",
+        train.lr,
+        thousands(schedule.patience),
+        thousands(max_steps)
+    )
+}
+
+/// "- How the runs stopped: horse-gallop 28 converged, 2 at the step budget, mean 6,340 steps
+/// (2,100 to 20,000); samba …" (the converged plan's runs stop at different points).
+fn stops(md: &mut String, o: &Outcome) {
+    let parts: Vec<String> = o
+        .sets
+        .iter()
+        .filter_map(|set| {
+            let name = set.dataset.name;
+            let runs: Vec<&RunResult> = o.results.iter().filter(|r| r.dataset == name).collect();
+            if runs.is_empty() {
+                return None;
+            }
+            let converged = runs.iter().filter(|r| r.converged()).count();
+            let budget = runs
+                .iter()
+                .filter(|r| r.stop_reason.as_deref() == Some("budget"))
+                .count();
+            let mut part = format!("{name} {converged} converged, {budget} at the step budget");
+            let unknown = runs.len() - converged - budget;
+            if unknown > 0 {
+                let _ = write!(part, ", {unknown} unrecorded");
+            }
+            let steps: Vec<f64> = runs
+                .iter()
+                .filter_map(|r| r.steps)
+                .map(|s| s as f64)
+                .collect();
+            if let Some(stat) = Stat::of(&steps) {
+                let (lo, hi) = steps.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &s| {
+                    (lo.min(s), hi.max(s))
+                });
+                let _ = write!(
+                    part,
+                    ", mean {} steps ({} to {})",
+                    thousands(stat.mean.round() as usize),
+                    thousands(lo as usize),
+                    thousands(hi as usize)
+                );
+            }
+            Some(part)
+        })
+        .collect();
+    if !parts.is_empty() {
+        let _ = writeln!(md, "- How the runs stopped: {}.", parts.join("; "));
+    }
+}
+
 /// "; horse-gallop 139.3 min, samba 643.1 min" where more than one data set ran.
 fn per_set_time(o: &Outcome) -> String {
     if o.sets.len() < 2 {
@@ -123,7 +209,8 @@ fn per_set_time(o: &Outcome) -> String {
                 .iter()
                 .filter(|r| r.dataset == name)
                 .map(|r| r.train_seconds + r.other_seconds)
-                .sum();
+                .sum::<f64>()
+                + 0.0;
             format!("{name} {:.1} min", seconds / 60.0)
         })
         .collect();

@@ -7,7 +7,7 @@ use super::columns_of;
 use crate::reproduce::Outcome;
 use crate::reproduce::plan::{COLUMNS, Group, OURS};
 use crate::reproduce::run::RunResult;
-use crate::reproduce::stats::sig;
+use crate::reproduce::stats::{sig, thousands};
 use std::fmt::Write;
 
 /// The section, for every data set with at least one finished run.
@@ -28,6 +28,9 @@ pub(super) fn seed_by_seed(md: &mut String, o: &Outcome) {
             wrote_heading = true;
         }
         table(md, name, &runs);
+        if let Some(max_steps) = o.options.budget.max_steps() {
+            stops(md, &runs, max_steps);
+        }
     }
 }
 
@@ -123,6 +126,37 @@ fn table(md: &mut String, dataset: &str, runs: &[&RunResult]) {
             md,
             "The validation loss and the test loss chose the same epoch in {same} of {} runs.\n",
             compared.len()
+        );
+    }
+}
+
+/// Under the converged plan: which runs did not converge but used up their step budget, so
+/// that with the header's counts every run's end is known.
+fn stops(md: &mut String, runs: &[&RunResult], max_steps: usize) {
+    let mut cut = Vec::new();
+    for column in COLUMNS {
+        let mut seeds: Vec<u64> = runs
+            .iter()
+            .filter(|r| r.column == column.id && r.stop_reason.as_deref() == Some("budget"))
+            .map(|r| r.seed)
+            .collect();
+        seeds.sort_unstable();
+        if !seeds.is_empty() {
+            let seeds: Vec<String> = seeds.iter().map(u64::to_string).collect();
+            cut.push(format!("`{}` (seed {})", column.id, seeds.join(", ")));
+        }
+    }
+    let converged = runs.iter().filter(|r| r.converged()).count();
+    if cut.is_empty() {
+        let _ = writeln!(md, "{converged} of {} runs converged.\n", runs.len());
+    } else {
+        let _ = writeln!(
+            md,
+            "Stopped by the {}-step budget before converging: {}; {converged} of {} runs \
+             converged.\n",
+            thousands(max_steps),
+            cut.join(", "),
+            runs.len()
         );
     }
 }

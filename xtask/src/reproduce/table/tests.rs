@@ -1,5 +1,5 @@
 use super::*;
-use crate::reproduce::plan::{self, PROTOCOLS};
+use crate::reproduce::plan::{self, Budget, PROTOCOLS};
 use crate::reproduce::{LoadedSet, Machine, Options, synthetic_config};
 use meshvae::ModelConfig;
 
@@ -10,6 +10,7 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         column: column.into(),
         seed,
         epochs: 5,
+        step_budget: None,
         model: ModelConfig::default(),
         levels: vec![258, 129],
         test_meshes: 8,
@@ -44,7 +45,7 @@ fn outcome(results: Vec<RunResult>) -> Outcome {
     Outcome {
         options: Options {
             datasets: vec![dataset],
-            epochs: 5,
+            budget: Budget::Epochs(5),
             seeds: 2,
             quick: true,
             protocol: &PROTOCOLS[0],
@@ -197,4 +198,66 @@ fn the_header_says_a_report_only_page_trained_nothing_and_gives_each_sets_time()
     assert!(md.contains("(it trained nothing: every run was read from its result file)"));
     // synthetic: 1 s + 1 s; samba: 120 s + 1 s.
     assert!(md.contains("; synthetic 0.0 min, samba 2.0 min."), "{md}");
+}
+
+#[test]
+fn the_header_describes_the_plan_and_how_converged_runs_stopped() {
+    let mut o = outcome(vec![result("ours", 1, 0.5), result("max", 1, 0.6)]);
+    o.options.records = Some("docs/runs".into());
+    let md = markdown(&o, None);
+    assert!(
+        md.contains(
+            "- 5 epochs per run (the authors' code runs 8000), batch 50, Adam with a constant \
+             learning rate of 1e-3 and no early stop,"
+        ),
+        "{md}"
+    );
+    assert!(md.contains("`docs/runs/<data set>/validation/e5/seed<N>/<column>.result.json`"));
+    assert!(
+        !md.contains("converged") && !md.contains("How the runs stopped"),
+        "{md}"
+    );
+
+    // The converged plan: three runs converged, one used its budget.
+    let converged = |column: &str, seed: u64, stop: &str, steps: u64| {
+        let mut r = result(column, seed, 0.5);
+        r.step_budget = Some(meshvae::DEFAULT_MAX_STEPS);
+        r.stop_reason = Some(stop.into());
+        r.steps = Some(steps);
+        r
+    };
+    o.options.budget = Budget::CONVERGED;
+    o.results = vec![
+        converged("ours", 1, "converged", 3000),
+        converged("ours", 2, "budget", 20_000),
+        converged("max", 1, "converged", 4000),
+        converged("max", 2, "converged", 5000),
+    ];
+    let md = markdown(&o, None);
+    assert!(
+        md.contains(
+            "- Every run trained until the validation loss converged (learning rate 1e-2 \
+             halved on plateaus, stop after 1,500 steps without a new best; budget 20,000 \
+             steps), as `meshvae train` does by default"
+        ),
+        "{md}"
+    );
+    assert!(!md.contains("epochs per run"), "{md}");
+    assert!(
+        md.contains(
+            "- How the runs stopped: synthetic 3 converged, 1 at the step budget, mean 8,000 \
+             steps (3,000 to 20,000)."
+        ),
+        "{md}"
+    );
+    assert!(
+        md.contains("`docs/runs/<data set>/validation/converged/seed<N>/<column>.result.json`")
+    );
+    assert!(
+        md.contains(
+            "Stopped by the 20,000-step budget before converging: `ours` (seed 2); 3 of 4 runs \
+             converged."
+        ),
+        "{md}"
+    );
 }
