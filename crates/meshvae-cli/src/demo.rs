@@ -206,7 +206,7 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
     run_as("train", &train_argv, train::run_train)?;
 
     println!("\n3. Evaluation on the meshes training never saw, beside the mean training shape.");
-    run_as("eval", &argv![path("model")], train::run_eval)?;
+    run_as("eval", &argv![path("model")], crate::eval::run_eval)?;
 
     println!("\n4. New shapes: z ~ N(0, I), decoded, each beside its nearest training mesh.");
     run_as(

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 mod demo;
 mod embed;
 mod error;
+mod eval;
 mod features;
 mod generate;
 mod info;
@@ -54,7 +55,7 @@ enum Command {
     /// Train a mesh VAE on a set; writes a model folder (resumable with --resume).
     Train(Box<train::TrainArgs>),
     /// Reconstruction errors of a trained model on its test and training meshes.
-    Eval(train::EvalArgs),
+    Eval(eval::EvalArgs),
     /// Write a trained model's reconstructions of the test meshes (or all) as OBJ files.
     Reconstruct(train::ReconstructArgs),
     /// Render a mesh, or a grid of a set's meshes, to PNG (optionally coloured by the error
@@ -80,7 +81,7 @@ fn main() -> ExitCode {
         Command::Roundtrip(args) => features::run_roundtrip(args),
         Command::Simplify(args) => simplify::run(args),
         Command::Train(args) => train::run_train(args),
-        Command::Eval(args) => train::run_eval(args),
+        Command::Eval(args) => eval::run_eval(args),
         Command::Reconstruct(args) => train::run_reconstruct(args),
         Command::Render(args) => render::run(args),
         Command::Generate(args) => generate::run(args),

@@ -1,0 +1,150 @@
+//! `meshvae eval`: the errors of a trained model on its test meshes, how its training stopped,
+//! and its loss curves.
+
+use crate::CliError;
+use crate::generate::model_and_set_selected;
+use candle_core::Device;
+use meshvae::ModelFolder;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    /// A model folder written by `meshvae train`.
+    model: PathBuf,
+    /// The mesh set (default: the one the model was trained on, as recorded in its config).
+    #[arg(long)]
+    set: Option<PathBuf>,
+    /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
+    /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance,
+    /// test_mean_distance_rigid, mean_shape_mean_distance_rigid, params,
+    /// params_without_biases, epochs, best_epoch, selected_on, stop_reason, steps,
+    /// still_improving, train_seconds, vertices, test_meshes, val_meshes, train_meshes,
+    /// split_by_shape, loss_plot).
+    #[arg(long)]
+    json: bool,
+    /// Report the weights with the lowest TEST loss, as the authors' code chose its checkpoint
+    /// (for comparison only: errors selected on the test meshes are not errors on unseen data).
+    #[arg(long)]
+    select_on_test: bool,
+}
+
+pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
+    let (trained, set) =
+        model_and_set_selected(&args.model, args.set.as_ref(), args.select_on_test)?;
+    let report = trained.evaluate(&set, &Device::Cpu)?;
+    let epochs = trained.epochs_trained()?;
+    let folder = ModelFolder::new(&args.model);
+    let status = meshvae::read_status(&folder)?;
+    // Redrawn when missing or older than the log (a run killed before it drew one).
+    let loss_plot = crate::loss_plot::refresh_loss_plot(&folder)
+        .map_err(|e| eprintln!("warning: no loss.png: {e}"))
+        .ok();
+    // Models trained before run.json existed: a full log ran its budget.
+    let stop_reason = match &status {
+        Some(s) => s.stop_reason.as_str(),
+        None if epochs.0 >= trained.spec.train.epochs => "budget",
+        None => "interrupted",
+    };
+    let value = serde_json::json!({
+        "test_rms": report.test.rms,
+        "test_rms_x1000": report.test.rms_x1000,
+        "test_rms_rel": report.test.rms_rel,
+        "test_mean_distance": report.test.mean_distance,
+        "test_mean_distance_rigid": report.test.mean_distance_rigid,
+        "mean_shape_mean_distance_rigid": report.mean_shape.mean_distance_rigid,
+        "train_rms": report.train.rms,
+        "train_rms_rel": report.train.rms_rel,
+        "mean_shape_rms": report.mean_shape.rms,
+        "mean_shape_rms_rel": report.mean_shape.rms_rel,
+        "params": report.params.with_biases,
+        "params_without_biases": report.params.without_biases,
+        "epochs": epochs.0,
+        "best_epoch": epochs.1,
+        "selected_on": trained.selected_on.as_str(),
+        "stop_reason": stop_reason,
+        "steps": status.as_ref().map(|s| s.steps),
+        "still_improving": status.as_ref().map(|s| s.still_improving),
+        "train_seconds": status.as_ref().map(|s| s.seconds),
+        "loss_plot": loss_plot.as_ref().map(|p| p.display().to_string()),
+        "vertices": report.vertices,
+        "test_meshes": report.test.meshes,
+        "val_meshes": trained.split.val.len(),
+        "train_meshes": report.train.meshes,
+        "split_by_shape": trained.spec.train.split_by_shape,
+    });
+    if args.json {
+        let text = serde_json::to_string_pretty(&value)
+            .map_err(|e| CliError::argument("--json", e.to_string()))?;
+        println!("{text}");
+        return Ok(());
+    }
+    println!("{}", args.model.display());
+    if trained.selected_on == meshvae::Selection::Test {
+        println!(
+            "  SELECTED ON TEST: these weights had the lowest loss on the test meshes (the \
+             authors' protocol); the test errors below are not errors on unseen data"
+        );
+    }
+    println!(
+        "  test RMS     {:.6} ({:.4} ×1000, {:.3e} of the bbox diagonal) over {} meshes",
+        report.test.rms, report.test.rms_x1000, report.test.rms_rel, report.test.meshes
+    );
+    println!(
+        "  train RMS    {:.6} ({:.3e} of the diagonal) over {} meshes",
+        report.train.rms, report.train.rms_rel, report.train.meshes
+    );
+    println!(
+        "  mean shape   {:.6} ({:.3e}): the trivial predictor, on the test meshes",
+        report.mean_shape.rms, report.mean_shape.rms_rel
+    );
+    println!(
+        "  mean dist.   {:.6} test, {:.6} mean shape (per-vertex, rigidly aligned as the authors' \
+         script; {:.6} test with centroids aligned only)",
+        report.test.mean_distance_rigid,
+        report.mean_shape.mean_distance_rigid,
+        report.test.mean_distance
+    );
+    println!(
+        "  parameters   {} ({} without biases)",
+        report.params.with_biases, report.params.without_biases
+    );
+    println!(
+        "  epochs       {} (weights of epoch {}, chosen on the {} loss; {} validation meshes)",
+        epochs.0,
+        epochs.1,
+        trained.selected_on,
+        trained.split.val.len()
+    );
+    match &status {
+        Some(s) => println!(
+            "  stopped      {}{} after {} steps, {:.0} s of training ({} path){}",
+            s.stop_reason,
+            if s.stop_reason == meshvae::StopReason::Budget && s.still_improving {
+                " WHILE STILL IMPROVING (not finished learning; continue with --resume)"
+            } else {
+                ""
+            },
+            s.steps,
+            s.seconds,
+            s.path,
+            if s.lr_cuts > 0 {
+                format!("; learning rate cut {} times, to {:.2e}", s.lr_cuts, s.lr)
+            } else {
+                String::new()
+            }
+        ),
+        None => println!("  stopped      {stop_reason} (a model trained before run.json)"),
+    }
+    if let Some(path) = &loss_plot {
+        println!("  loss curves  {}", path.display());
+    }
+    println!(
+        "  split        {}",
+        if trained.spec.train.split_by_shape {
+            "random, by shape (copies of one shape on one side)"
+        } else {
+            "random, mesh by mesh"
+        }
+    );
+    Ok(())
+}
