@@ -159,7 +159,7 @@ pub struct TrainSummary {
     pub epochs_total: usize,
     /// Why the run ended: converged or budget (an interrupted run returns no summary).
     pub stop_reason: StopReason,
-    /// Optimizer steps over the whole run, and the epoch budget in steps.
+    /// Optimizer steps over the whole run (resumed parts included).
     pub steps: u64,
     /// Whether the validation loss reached a new best within the schedule's patience (or the
     /// last tenth of the run): a run cut by its budget while this holds had not finished
