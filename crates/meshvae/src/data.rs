@@ -37,9 +37,7 @@ pub struct NormalizationFit {
 impl MeshData {
     /// Features of every mesh of `set` with a normalisation fitted on `split.train`.
     pub fn prepare(set: &MeshSet, split: Split, options: FeatureOptions) -> Result<Self> {
-        let extractor = FeatureExtractor::for_set(set, options)?;
-        let features = extractor.extract(set)?;
-        Self::from_features(features.features, split, features.warnings)
+        Self::prepare_fitted(set, split, options, NormalizationFit::default())
     }
 
     /// As [`Self::prepare`], with the normalisation fitted as `fit` says: on every mesh (test
