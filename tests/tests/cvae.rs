@@ -168,9 +168,11 @@ fn synthetic_bend_twist_samples_follow_their_label() {
             epochs: SYNTH_EPOCHS,
             batch: 4,
             loss: KL_HEAVY,
-            // The rate and constant schedule the shares were measured with.
+            // The rate, constant schedule and min–max feature ranges the shares were
+            // measured with.
             lr: 1e-3,
             schedule: Schedule::constant(),
+            normalize_quantile: 0.0,
             ..TrainConfig::default()
         },
     );
@@ -212,9 +214,11 @@ fn horse_gallop_and_poses_samples_follow_their_label() {
             epochs: HORSE_EPOCHS,
             batch: 4,
             loss: KL_HEAVY,
-            // The rate and constant schedule the shares were measured with.
+            // The rate, constant schedule and min–max feature ranges the shares were
+            // measured with.
             lr: 1e-3,
             schedule: Schedule::constant(),
+            normalize_quantile: 0.0,
             ..TrainConfig::default()
         },
     );

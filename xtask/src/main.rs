@@ -44,6 +44,10 @@ struct ReproduceArgs {
     /// [default: horse-gallop,samba; with --quick: synthetic and horse-gallop when present].
     #[arg(long, value_delimiter = ',')]
     dataset: Vec<String>,
+    /// Columns (network variants) to train, comma-separated, e.g. `ours,no-pool`; the results
+    /// page still shows every finished run [default: all].
+    #[arg(long, value_delimiter = ',')]
+    columns: Vec<String>,
     /// Epochs per run, at the authors' constant learning rate of 1e-3 [default: 600; with
     /// --quick: 2].
     #[arg(long)]
@@ -167,6 +171,26 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
                     .join(", ")
             ),
         })?;
+    let columns = if args.columns.is_empty() {
+        plan::COLUMNS.iter().collect()
+    } else {
+        args.columns
+            .iter()
+            .map(|id| {
+                plan::column(id).ok_or_else(|| reproduce::ReproError::Argument {
+                    arg: "--columns",
+                    message: format!(
+                        "{id:?} is not one of {}",
+                        plan::COLUMNS
+                            .iter()
+                            .map(|c| c.id)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?
+    };
     let default_work = if args.quick {
         workspace().join("target/reproduce/quick")
     } else {
@@ -174,6 +198,7 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
     };
     let options = Options {
         datasets: chosen,
+        columns,
         budget: if args.converged {
             Budget::Converged {
                 max_steps: if args.quick {

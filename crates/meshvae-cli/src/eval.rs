@@ -16,7 +16,10 @@ pub struct EvalArgs {
     set: Option<PathBuf>,
     /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
     /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance,
-    /// test_mean_distance_rigid, mean_shape_mean_distance_rigid, params,
+    /// test_mean_distance_rigid, mean_shape_mean_distance_rigid, test_copy_in_training_meshes,
+    /// test_copy_in_training_mean_distance_rigid, test_unseen_meshes,
+    /// test_unseen_mean_distance_rigid (null unless the split put copies of test shapes among
+    /// the training meshes), params,
     /// params_without_biases, epochs, best_epoch, selected_on, stop_reason, steps,
     /// still_improving, train_seconds, vertices, test_meshes, val_meshes, train_meshes,
     /// split_by_shape, loss_plot).
@@ -45,6 +48,8 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         None if epochs.0 >= trained.spec.train.epochs => "budget",
         None => "interrupted",
     };
+    let copy_in_training = report.copies.map(|c| c.copy_in_training);
+    let unseen = report.copies.and_then(|c| c.unseen);
     let value = serde_json::json!({
         "test_rms": report.test.rms,
         "test_rms_x1000": report.test.rms_x1000,
@@ -52,6 +57,11 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "test_mean_distance": report.test.mean_distance,
         "test_mean_distance_rigid": report.test.mean_distance_rigid,
         "mean_shape_mean_distance_rigid": report.mean_shape.mean_distance_rigid,
+        "test_copy_in_training_meshes": copy_in_training.map(|r| r.meshes),
+        "test_copy_in_training_mean_distance_rigid":
+            copy_in_training.map(|r| r.mean_distance_rigid),
+        "test_unseen_meshes": unseen.map(|r| r.meshes),
+        "test_unseen_mean_distance_rigid": unseen.map(|r| r.mean_distance_rigid),
         "train_rms": report.train.rms,
         "train_rms_rel": report.train.rms_rel,
         "mean_shape_rms": report.mean_shape.rms,
@@ -104,6 +114,16 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         report.mean_shape.mean_distance_rigid,
         report.test.mean_distance
     );
+    if let Some(seen) = copy_in_training {
+        println!(
+            "  of which     {:.6} over the {} test meshes whose shape a training mesh repeats \
+             (memory), {} over the {} others (generalisation)",
+            seen.mean_distance_rigid,
+            seen.meshes,
+            unseen.map_or("–".into(), |r| format!("{:.6}", r.mean_distance_rigid)),
+            unseen.map_or(0, |r| r.meshes),
+        );
+    }
     println!(
         "  parameters   {} ({} without biases)",
         report.params.with_biases, report.params.without_biases

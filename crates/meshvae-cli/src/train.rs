@@ -117,8 +117,8 @@ pub struct TrainArgs {
     /// (for comparisons: the test meshes then shape the model's inputs).
     #[arg(long)]
     normalize_on_all: bool,
-    /// Fit each feature group's range between the quantiles Q and 1 − Q (e.g. 0.001) and
-    /// clamp the outliers, instead of between min and max (the authors) [default: 0].
+    /// Fit each feature group's range between the quantiles Q and 1 − Q and clamp the
+    /// outliers; 0 fits it between min and max, as the authors' code [default: 0.001].
     #[arg(long)]
     normalize_quantile: Option<f64>,
     /// Continue the model in --out from its last checkpoint.

@@ -52,10 +52,14 @@ pub struct Adam {
     config: AdamConfig,
     slots: Vec<Slot>,
     step: u64,
+    /// The step of the last [`Adam::restart`]: the bias correction counts from it.
+    restarted_at: u64,
 }
 
 /// Name of the step counter in [`Adam::state_tensors`].
 const STEP: &str = "adam.step";
+/// Name of the step of the last restart (written only after one, so older states still load).
+const RESTARTED_AT: &str = "adam.restarted_at";
 
 impl Adam {
     /// An optimiser at step 0 over `vars` (e.g. `MeshVae::trainable_vars()`) with learning rate
@@ -100,6 +104,7 @@ impl Adam {
             config,
             slots,
             step: 0,
+            restarted_at: 0,
         })
     }
 
@@ -121,6 +126,23 @@ impl Adam {
         self.step
     }
 
+    /// Forgets the moments, as a fresh optimiser would, but keeps counting steps: after the
+    /// weights were put back to an earlier state (a diverged run), moments gathered on the way
+    /// out would steer the first steps. The bias correction starts again from here.
+    pub fn restart(&mut self) -> Result<()> {
+        for s in &self.slots {
+            s.m.set(&s.m.as_tensor().zeros_like()?)?;
+            s.v.set(&s.v.as_tensor().zeros_like()?)?;
+        }
+        self.restarted_at = self.step;
+        Ok(())
+    }
+
+    /// The exponent of the bias correction of the step being taken.
+    fn bias_steps(&self) -> i32 {
+        i32::try_from(self.step - self.restarted_at).unwrap_or(i32::MAX)
+    }
+
     /// One update from `grads`; variables without a gradient are left alone (moments too).
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         self.step_with_l2(grads, 0.0)
@@ -138,7 +160,7 @@ impl Adam {
             beta2,
             eps,
         } = self.config;
-        let t = i32::try_from(self.step).unwrap_or(i32::MAX);
+        let t = self.bias_steps();
         let scale_m = 1.0 / (1.0 - beta1.powi(t));
         let scale_v = 1.0 / (1.0 - beta2.powi(t));
         for slot in &self.slots {
@@ -247,7 +269,7 @@ impl Adam {
             beta2,
             eps,
         } = self.config;
-        let t = i32::try_from(self.step).unwrap_or(i32::MAX);
+        let t = self.bias_steps();
         let update = FusedUpdate {
             beta1,
             beta2,
@@ -276,6 +298,12 @@ impl Adam {
             .map(|s| s.var.device().clone())
             .unwrap_or(candle_core::Device::Cpu);
         let mut out = vec![(STEP.to_owned(), Tensor::new(&[self.step as i64], &device)?)];
+        if self.restarted_at > 0 {
+            out.push((
+                RESTARTED_AT.to_owned(),
+                Tensor::new(&[self.restarted_at as i64], &device)?,
+            ));
+        }
         for s in &self.slots {
             out.push((format!("adam.m.{}", s.name), s.m.as_tensor().copy()?));
             out.push((format!("adam.v.{}", s.name), s.v.as_tensor().copy()?));
@@ -287,17 +315,28 @@ impl Adam {
     /// anything changes; extra tensors not named `adam.*` are ignored (so a checkpoint can hold
     /// the model's tensors too).
     pub fn load_state(&mut self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        let step = tensors
-            .get(STEP)
-            .ok_or_else(|| VaeError::argument("adam state", format!("no {STEP}")))?;
-        let step = step
-            .flatten_all()?
-            .to_dtype(DType::I64)?
-            .to_vec1::<i64>()?
-            .first()
-            .copied()
-            .filter(|&s| s >= 0)
-            .ok_or_else(|| VaeError::argument("adam state", format!("{STEP} is not a count")))?;
+        let count = |name: &str| -> Result<Option<u64>> {
+            let Some(t) = tensors.get(name) else {
+                return Ok(None);
+            };
+            t.flatten_all()?
+                .to_dtype(DType::I64)?
+                .to_vec1::<i64>()?
+                .first()
+                .copied()
+                .filter(|&s| s >= 0)
+                .map(|s| Some(s as u64))
+                .ok_or_else(|| VaeError::argument("adam state", format!("{name} is not a count")))
+        };
+        let step =
+            count(STEP)?.ok_or_else(|| VaeError::argument("adam state", format!("no {STEP}")))?;
+        let restarted_at = count(RESTARTED_AT)?;
+        if restarted_at.is_some_and(|r| r > step) {
+            return Err(VaeError::argument(
+                "adam state",
+                format!("{RESTARTED_AT} lies after {STEP}"),
+            ));
+        }
         let mut moments = Vec::with_capacity(self.slots.len());
         for s in &self.slots {
             let get = |kind: &str| -> Result<&Tensor> {
@@ -317,7 +356,7 @@ impl Adam {
             };
             moments.push((get("m")?, get("v")?));
         }
-        let known = 1 + 2 * self.slots.len();
+        let known = 1 + 2 * self.slots.len() + usize::from(restarted_at.is_some());
         let ours = tensors.keys().filter(|k| k.starts_with("adam.")).count();
         if ours != known {
             return Err(VaeError::argument(
@@ -329,7 +368,8 @@ impl Adam {
             s.m.set(&m.to_dtype(s.var.dtype())?)?;
             s.v.set(&v.to_dtype(s.var.dtype())?)?;
         }
-        self.step = step as u64;
+        self.step = step;
+        self.restarted_at = restarted_at.unwrap_or(0);
         Ok(())
     }
 }

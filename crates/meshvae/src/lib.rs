@@ -91,14 +91,17 @@ pub use embed::{
 };
 pub use error::{Result, VaeError};
 pub use eval::{ErrorReport, error_report, mean_shape};
-pub use folder::{DEFAULT_MAX_STEPS, ModelFolder, ModelSpec, SplitFile, TrainConfig, TrainedModel};
+pub use folder::{
+    DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE, ModelFolder, ModelSpec, SplitFile, TrainConfig,
+    TrainedModel,
+};
 pub use generate::{GenerateOptions, Generated, Neighbour, generate};
 pub use interpolate::{Interpolation, interpolate};
 pub use loss::{Loss, LossWeights};
 pub use model::{Encoded, Engine, MeshVae, Mode, StepLoss};
 pub use params::{ParamCount, param_count};
 pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
-pub use reconstruct::EvalReport;
+pub use reconstruct::{CopySplit, EvalReport};
 pub use rng::Rng;
 pub use schedule::{Decision, Schedule, ScheduleState, StopReason};
 pub use split::{Selection, Split, resolve_mesh};

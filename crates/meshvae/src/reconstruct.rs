@@ -9,7 +9,7 @@ use crate::folder::TrainedModel;
 use crate::params::ParamCount;
 use candle_core::{Device, Tensor};
 use deform_features::{CHANNELS, FeatureExtractor, FeatureSet, Reconstructor, RestMesh};
-use mesh_io::{MeshSet, Point};
+use mesh_io::{MeshSet, Point, ShapeGroups};
 use serde::{Deserialize, Serialize};
 
 /// Meshes reconstructed per network call (bounds memory on large meshes).
@@ -25,6 +25,21 @@ pub struct EvalReport {
     pub params: ParamCount,
     pub epochs: usize,
     pub vertices: usize,
+    /// The test error split by whether a copy of the test shape is among the training meshes
+    /// (present only when some is: a split drawn mesh by mesh of a set that holds shapes twice,
+    /// as horse-gallop under the authors' protocol).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub copies: Option<CopySplit>,
+}
+
+/// [`EvalReport::test`] over two parts of the test meshes: those whose shape a training mesh
+/// repeats (within [`ShapeGroups::DEFAULT_TOLERANCE`]), which measure memory, and the others,
+/// which measure generalisation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CopySplit {
+    pub copy_in_training: ErrorReport,
+    /// `None` when every test shape has a copy in training.
+    pub unseen: Option<ErrorReport>,
 }
 
 impl TrainedModel {
@@ -110,10 +125,9 @@ impl TrainedModel {
     pub fn evaluate(&self, set: &MeshSet, device: &Device) -> Result<EvalReport> {
         let frames =
             |ids: &[usize]| -> Vec<&[Point]> { ids.iter().map(|&i| set.frame(i)).collect() };
-        let test = error_report(
-            &frames(&self.split.test),
-            &self.reconstruct(set, &self.split.test, device)?,
-        )?;
+        let test_out = self.reconstruct(set, &self.split.test, device)?;
+        let test = error_report(&frames(&self.split.test), &test_out)?;
+        let copies = self.copy_split(set, &test_out)?;
         let train = error_report(
             &frames(&self.split.train),
             &self.reconstruct(set, &self.split.train, device)?,
@@ -130,6 +144,36 @@ impl TrainedModel {
             params: self.model.param_count(),
             epochs: self.spec.train.epochs,
             vertices: self.spec.vertices,
+            copies,
         })
+    }
+
+    /// The test error of the test meshes with and without a copy among the training meshes
+    /// (`None` when no test mesh has one); `test_out` are the test meshes' reconstructions.
+    fn copy_split(&self, set: &MeshSet, test_out: &[Vec<[f64; 3]>]) -> Result<Option<CopySplit>> {
+        let groups = set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)?;
+        let trained: std::collections::HashSet<usize> =
+            self.split.train.iter().map(|&i| groups.group(i)).collect();
+        let (mut seen, mut unseen) = ((vec![], vec![]), (vec![], vec![]));
+        for (&i, out) in self.split.test.iter().zip(test_out) {
+            let part = if trained.contains(&groups.group(i)) {
+                &mut seen
+            } else {
+                &mut unseen
+            };
+            part.0.push(set.frame(i));
+            part.1.push(out.clone());
+        }
+        if seen.0.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(CopySplit {
+            copy_in_training: error_report(&seen.0, &seen.1)?,
+            unseen: if unseen.0.is_empty() {
+                None
+            } else {
+                Some(error_report(&unseen.0, &unseen.1)?)
+            },
+        }))
     }
 }

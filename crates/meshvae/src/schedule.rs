@@ -120,8 +120,10 @@ pub struct ScheduleState {
     /// Steps since that best, and since the last rate cut (or the best, whichever is later).
     pub since_best: usize,
     pub since_cut: usize,
-    /// Rate cuts so far.
+    /// Rate cuts so far (rollbacks included).
     pub cuts: usize,
+    /// Times the run diverged and went back to its best weights ([`Self::rollback`]).
+    pub rollbacks: usize,
 }
 
 impl Default for ScheduleState {
@@ -132,6 +134,7 @@ impl Default for ScheduleState {
             since_best: 0,
             since_cut: 0,
             cuts: 0,
+            rollbacks: 0,
         }
     }
 }
@@ -181,6 +184,17 @@ impl ScheduleState {
         Decision::Continue
     }
 
+    /// After a divergence (a non-finite loss), when the weights go back to those of the best
+    /// epoch: the rate is halved whatever the schedule (a step of that size just failed), and
+    /// the counts since the best start again, since the weights are the best's.
+    pub fn rollback(&mut self) {
+        self.scale *= 0.5;
+        self.cuts += 1;
+        self.rollbacks += 1;
+        self.since_best = 0;
+        self.since_cut = 0;
+    }
+
     /// Whether the loss was still reaching new bests recently: within the last `patience`
     /// steps (or, without early stopping, the last tenth of `steps_done`).
     pub fn still_improving(&self, schedule: &Schedule, steps_done: usize) -> bool {
@@ -200,19 +214,27 @@ impl ScheduleState {
             self.since_best as f64,
             self.since_cut as f64,
             self.cuts as f64,
+            self.rollbacks as f64,
         ]
     }
 
+    /// Unpacks [`Self::to_vec`] (checkpoints written before rollbacks existed have five
+    /// numbers).
     pub fn from_slice(v: &[f64]) -> Option<Self> {
-        let &[scale, best, since_best, since_cut, cuts] = v else {
+        let (&[scale, best, since_best, since_cut, cuts], rollbacks) = (v.get(..5)?, v.get(5))
+        else {
             return None;
         };
+        if v.len() > 6 {
+            return None;
+        }
         Some(Self {
             scale,
             best,
             since_best: since_best as usize,
             since_cut: since_cut as usize,
             cuts: cuts as usize,
+            rollbacks: rollbacks.map_or(0, |&r| r as usize),
         })
     }
 }
@@ -263,6 +285,29 @@ mod tests {
         assert_eq!((st.since_best, st.since_cut, st.scale), (0, 0, 0.5));
         assert!(st.still_improving(&s, 100));
         assert_eq!(st.lr(&s, 1.0, 100), 0.5);
+    }
+
+    #[test]
+    fn a_rollback_halves_the_rate_even_when_constant_and_restarts_the_counts() {
+        let s = Schedule::constant();
+        let mut st = ScheduleState::default();
+        st.update(&s, 10.0, 1);
+        st.update(&s, 11.0, 7);
+        assert_eq!(st.since_best, 7);
+        st.rollback();
+        st.rollback();
+        assert_eq!((st.scale, st.cuts, st.rollbacks), (0.25, 2, 2));
+        assert_eq!((st.since_best, st.since_cut, st.best), (0, 0, 10.0));
+        assert_eq!(st.lr(&s, 1e-2, 100), 2.5e-3);
+        let packed = st.to_vec();
+        assert_eq!(ScheduleState::from_slice(&packed), Some(st));
+        // A checkpoint from before rollbacks existed: five numbers.
+        let old = ScheduleState::from_slice(&packed[..5]).unwrap();
+        assert_eq!((old.rollbacks, old.cuts), (0, 2));
+        assert_eq!(
+            ScheduleState::from_slice(&[packed.clone(), vec![0.0]].concat()),
+            None
+        );
     }
 
     #[test]

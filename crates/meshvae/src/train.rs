@@ -97,6 +97,10 @@ pub struct TrainOptions {
     /// Train with the hand-written CPU step ([`crate::Engine`]) whenever it supports the model;
     /// `false` forces candle's autograd path (the reference).
     pub engine: bool,
+    /// Tests only: the loss of this optimizer step (counted from 1) is taken as non-finite,
+    /// once, to exercise the recovery from a divergence.
+    #[doc(hidden)]
+    pub fail_step: Option<u64>,
 }
 
 impl Default for TrainOptions {
@@ -110,6 +114,7 @@ impl Default for TrainOptions {
             test_every_steps: 10,
             device: Device::Cpu,
             engine: true,
+            fail_step: None,
         }
     }
 }
@@ -264,6 +269,7 @@ pub fn train(
             .still_improving(&schedule, adam.step_count() as usize),
         lr: adam.config().lr,
         lr_cuts: progress.schedule.cuts,
+        rollbacks: progress.schedule.rollbacks,
         seconds: progress.seconds,
         path: if engine_used { "engine" } else { "candle" }.into(),
     };
@@ -296,7 +302,8 @@ pub fn train(
         progress.epoch + 1
     };
 
-    for epoch in first_epoch..=epochs {
+    let mut epoch = first_epoch;
+    while epoch <= epochs {
         let t0 = Instant::now();
         let steps_before = adam.step_count();
         let mut order = train_ids.clone();
@@ -311,6 +318,7 @@ pub fn train(
             (None, true) => crate::model::Engine::new(&model, batch)?,
             (None, false) => None,
         };
+        let mut divergence = None;
         for chunk in order.chunks(batch) {
             adam.set_lr(
                 progress
@@ -321,13 +329,13 @@ pub fn train(
             let c = data.conditions(&model, chunk)?;
             let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
             let diverged = |total: f64, rec: f64, kl: f64, l2: f64| {
-                bar.abandon();
-                VaeError::Diverged(format!(
-                    "epoch {epoch}: the loss is {total} (rec {rec}, kl {kl}, l2 {l2}); the \
-                     checkpoint of epoch {} is kept — try a smaller learning rate",
-                    progress.epoch
-                ))
+                format!("epoch {epoch}: the loss is {total} (rec {rec}, kl {kl}, l2 {l2})")
             };
+            if options.fail_step == Some(adam.step_count() + 1) && progress.schedule.rollbacks == 0
+            {
+                divergence = Some(format!("epoch {epoch}: the loss is NaN (injected)"));
+                break;
+            }
             let w_l2 = spec.train.loss.l2;
             let (total, rec, kl, l2) = match (engine.as_mut(), &c) {
                 (Some(engine), None) => {
@@ -335,13 +343,15 @@ pub fn train(
                     if !(l.rec + l.kl).is_finite() {
                         let l2 = model.l2_term()?.to_dtype(candle_core::DType::F64)?;
                         let l2 = l2.to_scalar::<f64>()? * w_l2;
-                        return Err(diverged(l.rec + l.kl + l2, l.rec, l.kl, l2));
+                        divergence = Some(diverged(l.rec + l.kl + l2, l.rec, l.kl, l2));
+                        break;
                     }
                     // Adam also returns the L2 term of the weights it started from.
                     let l2 = engine.apply_adam(&mut adam, w_l2)?;
                     let total = l.rec + l.kl + l2;
                     if !total.is_finite() {
-                        return Err(diverged(total, l.rec, l.kl, l2));
+                        divergence = Some(diverged(total, l.rec, l.kl, l2));
+                        break;
                     }
                     (total, l.rec, l.kl, l2)
                 }
@@ -354,7 +364,8 @@ pub fn train(
                         .to_scalar::<f64>()?
                         + loss.l2;
                     if !total.is_finite() {
-                        return Err(diverged(total, loss.rec, loss.kl, loss.l2));
+                        divergence = Some(diverged(total, loss.rec, loss.kl, loss.l2));
+                        break;
                     }
                     let grads = model.backward(&loss.total)?;
                     adam.step_with_l2(&grads, w_l2)?;
@@ -374,7 +385,44 @@ pub fn train(
             let engine = engine.as_mut();
             epoch_loss(&model, &data, ids, batch, &spec.train.loss, device, engine)
         };
-        let val_loss = loss_on(&data.split.val)?;
+        let mut val_loss = None;
+        if divergence.is_none() {
+            val_loss = loss_on(&data.split.val)?;
+            // The last step can leave non-finite weights behind a finite training loss.
+            if let Some(v) = val_loss.filter(|v| !v.is_finite()) {
+                divergence = Some(format!("epoch {epoch}: the validation loss is {v}"));
+            }
+        }
+        if let Some(what) = divergence {
+            // Back to the best weights at half the rate, moments forgotten; the epoch is
+            // trained again (with the next shuffle).
+            drop(engine);
+            if progress.schedule.rollbacks >= MAX_ROLLBACKS || progress.best_epoch == 0 {
+                bar.abandon();
+                return Err(VaeError::Diverged(format!(
+                    "{what}, after {} restarts from the best weights at a smaller learning \
+                     rate; the checkpoint of epoch {} is kept — try a smaller learning rate \
+                     (--lr)",
+                    progress.schedule.rollbacks, progress.epoch
+                )));
+            }
+            restore_best(&mut model, best.as_ref(), &folder.weights())?;
+            adam.restart()?;
+            progress.schedule.rollback();
+            let message = format!(
+                "warning: {what}; training goes on from the weights of epoch {} at half the \
+                 learning rate ({:.1e})",
+                progress.best_epoch,
+                progress.schedule.lr(&schedule, base_lr, u64::MAX)
+            );
+            // A hidden bar prints nothing, and a recovered divergence must not pass unseen.
+            if bar.is_hidden() {
+                eprintln!("{message}");
+            } else {
+                bar.println(message);
+            }
+            continue;
+        }
         // The schedule sees the loss that chooses the weights (validation, or training).
         let score = val_loss.unwrap_or(sums[0] / n);
         let decision = progress
@@ -472,6 +520,7 @@ pub fn train(
         if finished {
             break;
         }
+        epoch += 1;
     }
     bar.finish();
     let state = progress.schedule;
@@ -489,6 +538,28 @@ pub fn train(
         selected_on: selection,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Restarts from the best weights this many times before a diverging run is given up.
+const MAX_ROLLBACKS: usize = 3;
+
+/// Puts the best weights back into `model`: the copy kept in memory, else the weights file
+/// (written at every new best when the model is too large to keep, and at checkpoints).
+fn restore_best(
+    model: &mut MeshVae,
+    kept: Option<&std::collections::BTreeMap<String, candle_core::Tensor>>,
+    path: &Path,
+) -> Result<()> {
+    match kept {
+        Some(tensors) => {
+            let tensors: std::collections::HashMap<_, _> = tensors
+                .iter()
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect();
+            model.set_tensors(&tensors, path)
+        }
+        None => model.load(path),
+    }
 }
 
 /// A copy of the model's tensors if small enough to keep in memory until the next checkpoint;

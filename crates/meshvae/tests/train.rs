@@ -284,6 +284,45 @@ fn a_non_finite_loss_stops_training_with_a_message() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// A divergence after the first epochs is not the end of the run: training goes back to the
+/// best weights at half the rate, with fresh optimizer moments, and the run says so.
+#[test]
+fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
+    let set = small_set(3, 8);
+    let out = scratch("rollback");
+    let mut req = request(&set, &out, 8);
+    req.train.schedule = Schedule::constant();
+    let lr = req.train.lr;
+    let options = TrainOptions {
+        fail_step: Some(9),
+        ..options(false, false)
+    };
+    let summary = train(&req, &options, |_| {}).unwrap();
+    assert_eq!(summary.epochs_total, 8);
+    let log = read_log(&ModelFolder::new(&out).log()).unwrap();
+    // Every epoch logged once, in order; the failed attempt at the divergent one is not.
+    let epochs: Vec<usize> = log.iter().map(|r| r.epoch).collect();
+    assert_eq!(epochs, (1..=8).collect::<Vec<_>>());
+    let steps_per_epoch = log[0].step as usize;
+    let failed_epoch = 8 / steps_per_epoch + 1;
+    for r in &log {
+        let expected = if r.epoch < failed_epoch { lr } else { lr / 2.0 };
+        assert_eq!(r.lr, Some(expected), "epoch {}", r.epoch);
+        assert!(r.train_loss.is_finite());
+    }
+    // The steps of the abandoned attempt count: the optimizer took them.
+    let failed_steps = 9 - (failed_epoch - 1) * steps_per_epoch;
+    assert_eq!(
+        summary.steps as usize,
+        8 * steps_per_epoch + failed_steps - 1,
+        "{log:?}"
+    );
+    let status = read_status(&ModelFolder::new(&out)).unwrap().unwrap();
+    assert_eq!((status.rollbacks, status.lr_cuts), (1, 1));
+    assert_eq!(status.lr, lr / 2.0);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 /// The default protocol: no test mesh influences training or the choice of checkpoint. Two
 /// runs whose sets differ only in the test meshes (bent out of shape) end with bit-identical
 /// weights, checkpoints and validation losses; only the logged test losses differ.
@@ -421,6 +460,9 @@ fn copies_of_one_shape_stay_on_one_side_of_the_split() {
     }
     assert!(!file.test.is_empty() && !file.val.is_empty());
     assert_eq!(file.test.len(), n, "half of the shapes test");
+    let trained = TrainedModel::load(&out, &Device::Cpu).unwrap();
+    let report = trained.evaluate(&twice, &Device::Cpu).unwrap();
+    assert_eq!(report.copies, None, "no test shape is trained on");
 
     // Opting out draws mesh by mesh, exactly the plain random split.
     req.train.split_by_shape = false;
@@ -432,6 +474,28 @@ fn copies_of_one_shape_stay_on_one_side_of_the_split() {
         .unwrap();
     assert!(!file.by_shape && file.repeated_shapes.is_empty());
     assert_eq!(file.split(), plain);
+    // Evaluation tells the test meshes whose copy trained from the others.
+    let twin = |i: usize| (i + n) % (2 * n);
+    let with_copy = file
+        .test
+        .iter()
+        .filter(|&&i| file.train.contains(&twin(i)))
+        .count();
+    assert!(with_copy > 0 && with_copy < file.test.len(), "{file:?}");
+    let trained = TrainedModel::load(&out, &Device::Cpu).unwrap();
+    let report = trained.evaluate(&twice, &Device::Cpu).unwrap();
+    let copies = report.copies.expect("some test shapes are trained on");
+    let unseen = copies.unseen.expect("some are not");
+    assert_eq!(copies.copy_in_training.meshes, with_copy);
+    assert_eq!(unseen.meshes, file.test.len() - with_copy);
+    // The two parts average to the whole (every mesh has as many vertices).
+    let parts = copies.copy_in_training.mean_distance_rigid * with_copy as f64
+        + unseen.mean_distance_rigid * unseen.meshes as f64;
+    let whole = report.test.mean_distance_rigid * file.test.len() as f64;
+    assert!(
+        (parts - whole).abs() <= 1e-9 * whole.max(1e-12),
+        "{parts} vs {whole}"
+    );
     // A model trained by shape is not resumed as one drawn by mesh.
     let same = train(&req, &options(true, false), |_| {});
     assert!(same.is_ok(), "same settings resume: {same:?}");

@@ -78,6 +78,20 @@ pub struct RunResult {
     pub steps: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_mean_distance_rigid: Option<f64>,
+    /// The rigid mean distance over the test meshes whose shape a training mesh repeats, and
+    /// over the others, with their counts; present where the split put copies of test shapes
+    /// among the training meshes (`--split-by-mesh` on horse-gallop).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub copy_split: Option<CopySplitRecord>,
+}
+
+/// [`meshvae::CopySplit`] as a run records it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CopySplitRecord {
+    pub copy_in_training_meshes: usize,
+    pub copy_in_training_mean_distance_rigid: f64,
+    pub unseen_meshes: usize,
+    pub unseen_mean_distance_rigid: Option<f64>,
 }
 
 impl RunResult {
@@ -244,6 +258,12 @@ pub fn execute(
         stop_reason: status.as_ref().map(|s| s.stop_reason.to_string()),
         steps: status.as_ref().map(|s| s.steps),
         test_mean_distance_rigid: Some(report.test.mean_distance_rigid),
+        copy_split: report.copies.map(|c| CopySplitRecord {
+            copy_in_training_meshes: c.copy_in_training.meshes,
+            copy_in_training_mean_distance_rigid: c.copy_in_training.mean_distance_rigid,
+            unseen_meshes: c.unseen.map_or(0, |u| u.meshes),
+            unseen_mean_distance_rigid: c.unseen.map(|u| u.mean_distance_rigid),
+        }),
     };
     let path = run.result_path(records);
     if let Some(parent) = path.parent() {
@@ -397,6 +417,7 @@ mod tests {
             still_improving: true,
             lr: 1e-2,
             lr_cuts: 0,
+            rollbacks: 0,
             seconds: 0.2,
             path: "engine".into(),
         };

@@ -215,3 +215,40 @@ fn bad_state_and_config_are_typed_errors() {
             .contains("no adam.m.a")
     );
 }
+
+#[test]
+fn a_restart_steps_as_a_fresh_optimiser_and_survives_the_state() {
+    let (a, b, t) = setup(4);
+    let vars = || vec![("a".to_owned(), a.clone()), ("b".to_owned(), b.clone())];
+    let mut opt = Adam::new(vars(), 1e-3).unwrap();
+    for _ in 0..7 {
+        opt.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+    }
+    opt.restart().unwrap();
+    assert_eq!(opt.step_count(), 7, "a restart keeps counting steps");
+    let (wa, wb) = (a.as_tensor().copy().unwrap(), b.as_tensor().copy().unwrap());
+    let state: HashMap<String, Tensor> = opt.state_tensors().unwrap().into_iter().collect();
+    for _ in 0..3 {
+        opt.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+    }
+    let (ua, ub) = (a.as_tensor().copy().unwrap(), b.as_tensor().copy().unwrap());
+    // A fresh optimiser (zero moments, bias correction from step 1) from the same weights.
+    a.set(&wa).unwrap();
+    b.set(&wb).unwrap();
+    let mut fresh = Adam::new(vars(), 1e-3).unwrap();
+    for _ in 0..3 {
+        fresh.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+    }
+    assert_eq!(max_diff(a.as_tensor(), &ua), 0.0);
+    assert_eq!(max_diff(b.as_tensor(), &ub), 0.0);
+    // The restarted state reloads into another optimiser and steps the same.
+    a.set(&wa).unwrap();
+    b.set(&wb).unwrap();
+    let mut resumed = Adam::new(vars(), 1e-3).unwrap();
+    resumed.load_state(&state).unwrap();
+    for _ in 0..3 {
+        resumed.step(&loss(&a, &b, &t).backward().unwrap()).unwrap();
+    }
+    assert_eq!(max_diff(a.as_tensor(), &ua), 0.0);
+    assert_eq!(resumed.step_count(), 10);
+}

@@ -27,6 +27,10 @@ pub struct RunStatus {
     /// The learning rate at the end, and how many times the schedule cut it.
     pub lr: f64,
     pub lr_cuts: usize,
+    /// Times the loss diverged (became non-finite) and training went back to the best weights
+    /// at half the rate (counted in `lr_cuts` too).
+    #[serde(default)]
+    pub rollbacks: usize,
     /// Seconds of training over every resumed part.
     pub seconds: f64,
     /// What computed the steps: `engine` (the hand-written CPU step) or `candle` (autograd).

@@ -34,6 +34,7 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         stop_reason: None,
         steps: None,
         test_mean_distance_rigid: None,
+        copy_split: None,
     }
 }
 
@@ -45,6 +46,7 @@ fn outcome(results: Vec<RunResult>) -> Outcome {
     Outcome {
         options: Options {
             datasets: vec![dataset],
+            columns: plan::COLUMNS.iter().collect(),
             budget: Budget::Epochs(5),
             seeds: 2,
             quick: true,
