@@ -39,6 +39,10 @@ pub struct TrainArgs {
     /// Raise the learning rate linearly from a tenth over this many first steps [default: 0].
     #[arg(long)]
     warmup: Option<usize>,
+    /// Cut the rate and stop on a moving average of the validation loss over about this many
+    /// steps, not on the noisy loss itself; 0 = the loss itself [default: 0].
+    #[arg(long)]
+    smoothing: Option<usize>,
     /// Seeds the split, the initial weights, the shuffles and the sampling [default: 1].
     #[arg(long)]
     seed: Option<u64>,
@@ -254,6 +258,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     }
     if let Some(p) = args.lr_patience {
         train.schedule.lr_patience = p;
+    }
+    if let Some(n) = args.smoothing {
+        train.schedule.smoothing_steps = n;
     }
     if let Some(w) = args.warmup {
         train.schedule.warmup_steps = w;

@@ -27,6 +27,13 @@ pub struct Schedule {
     pub patience: usize,
     /// A new best must lie below the previous best by this fraction of it.
     pub min_improvement: f64,
+    /// The cuts and the stop look at an exponential moving average of the validation loss over
+    /// about this many steps instead of the loss itself (0: the loss itself). A loss as noisy
+    /// as that of two validation meshes otherwise keeps reaching "new bests" by chance on a
+    /// plateau, and the rate stays too high for too long. (The checkpoint is still the one
+    /// with the lowest loss itself.)
+    #[serde(default)]
+    pub smoothing_steps: usize,
 }
 
 impl Default for Schedule {
@@ -40,6 +47,7 @@ impl Default for Schedule {
             min_lr_ratio: 1.0 / 32.0,
             patience: 1500,
             min_improvement: 1e-3,
+            smoothing_steps: 0,
         }
     }
 }
@@ -55,6 +63,7 @@ impl Schedule {
             min_lr_ratio: 1.0,
             patience: 0,
             min_improvement: 0.0,
+            smoothing_steps: 0,
         }
     }
 
@@ -124,6 +133,9 @@ pub struct ScheduleState {
     pub cuts: usize,
     /// Times the run diverged and went back to its best weights ([`Self::rollback`]).
     pub rollbacks: usize,
+    /// The moving average of the loss ([`Schedule::smoothing_steps`]; infinite before the
+    /// first finite loss).
+    pub smoothed: f64,
 }
 
 impl Default for ScheduleState {
@@ -135,6 +147,7 @@ impl Default for ScheduleState {
             since_cut: 0,
             cuts: 0,
             rollbacks: 0,
+            smoothed: f64::INFINITY,
         }
     }
 }
@@ -162,6 +175,16 @@ impl ScheduleState {
 
     /// Takes an epoch of `steps` steps that ended with validation loss `loss`.
     pub fn update(&mut self, schedule: &Schedule, loss: f64, steps: usize) -> Decision {
+        let loss = if schedule.smoothing_steps == 0 || !loss.is_finite() {
+            loss
+        } else if !self.smoothed.is_finite() {
+            self.smoothed = loss;
+            loss
+        } else {
+            let weight = (steps as f64 / schedule.smoothing_steps as f64).min(1.0);
+            self.smoothed += weight * (loss - self.smoothed);
+            self.smoothed
+        };
         if loss.is_finite() && loss < self.best * (1.0 - schedule.min_improvement) {
             self.best = loss;
             self.since_best = 0;
@@ -215,17 +238,18 @@ impl ScheduleState {
             self.since_cut as f64,
             self.cuts as f64,
             self.rollbacks as f64,
+            self.smoothed,
         ]
     }
 
-    /// Unpacks [`Self::to_vec`] (checkpoints written before rollbacks existed have five
-    /// numbers).
+    /// Unpacks [`Self::to_vec`] (checkpoints written before rollbacks and smoothing existed
+    /// have five numbers).
     pub fn from_slice(v: &[f64]) -> Option<Self> {
         let (&[scale, best, since_best, since_cut, cuts], rollbacks) = (v.get(..5)?, v.get(5))
         else {
             return None;
         };
-        if v.len() > 6 {
+        if v.len() > 7 {
             return None;
         }
         Some(Self {
@@ -235,6 +259,7 @@ impl ScheduleState {
             since_cut: since_cut as usize,
             cuts: cuts as usize,
             rollbacks: rollbacks.map_or(0, |&r| r as usize),
+            smoothed: v.get(6).copied().unwrap_or(f64::INFINITY),
         })
     }
 }
@@ -251,6 +276,7 @@ mod tests {
             min_lr_ratio: 0.5,
             patience: 12,
             min_improvement: 0.01,
+            smoothing_steps: 0,
         }
     }
 
@@ -285,6 +311,38 @@ mod tests {
         assert_eq!((st.since_best, st.since_cut, st.scale), (0, 0, 0.5));
         assert!(st.still_improving(&s, 100));
         assert_eq!(st.lr(&s, 1.0, 100), 0.5);
+    }
+
+    #[test]
+    fn a_smoothed_loss_sees_the_plateau_that_lucky_dips_hide() {
+        // A plateau at 100 with a dip every third epoch, each a little deeper than the last:
+        // the raw loss reaches a new best every three epochs and the rate is never cut.
+        let loss = |k: usize| {
+            if k % 3 == 2 {
+                50.0 - 0.02 * k as f64
+            } else {
+                100.0
+            }
+        };
+        let raw = Schedule {
+            patience: 0,
+            min_improvement: 1e-3,
+            ..schedule()
+        };
+        let smooth = Schedule {
+            smoothing_steps: 20,
+            ..raw
+        };
+        let (mut a, mut b) = (ScheduleState::default(), ScheduleState::default());
+        for k in 0..200 {
+            a.update(&raw, loss(k), 1);
+            b.update(&smooth, loss(k), 1);
+        }
+        assert_eq!(a.cuts, 0);
+        assert!(b.cuts >= 1, "{b:?}");
+        assert!((b.smoothed - (200.0 + 50.0) / 3.0).abs() < 5.0, "{b:?}");
+        let packed = b.to_vec();
+        assert_eq!(ScheduleState::from_slice(&packed), Some(b));
     }
 
     #[test]
