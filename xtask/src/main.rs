@@ -120,6 +120,21 @@ fn workspace() -> &'static Path {
     manifest.parent().unwrap_or(manifest)
 }
 
+/// The error for a value of `arg` that names none of `names`.
+fn not_one_of<'a>(
+    arg: &'static str,
+    value: &str,
+    names: impl Iterator<Item = &'a str>,
+) -> reproduce::ReproError {
+    reproduce::ReproError::Argument {
+        arg,
+        message: format!(
+            "{value:?} is not one of {}",
+            names.collect::<Vec<_>>().join(", ")
+        ),
+    }
+}
+
 /// The step budget of `--quick --converged`: enough to check the pipeline, far from converged.
 const QUICK_MAX_STEPS: usize = 4;
 
@@ -144,50 +159,28 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
             chosen.extend(plan::DATASETS.iter());
             continue;
         }
-        let dataset = plan::dataset(name).ok_or_else(|| reproduce::ReproError::Argument {
-            arg: "--dataset",
-            message: format!(
-                "{name:?} is not one of {}, all",
-                plan::DATASETS
-                    .iter()
-                    .map(|d| d.name)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+        let dataset = plan::dataset(name).ok_or_else(|| {
+            let names = plan::DATASETS.iter().map(|d| d.name);
+            not_one_of("--dataset", name, names.chain(["all"]))
         })?;
         chosen.push(dataset);
     }
     chosen.dedup_by_key(|d| d.name);
-    let protocol =
-        plan::protocol(&args.protocol).ok_or_else(|| reproduce::ReproError::Argument {
-            arg: "--protocol",
-            message: format!(
-                "{:?} is not one of {}",
-                args.protocol,
-                plan::PROTOCOLS
-                    .iter()
-                    .map(|p| p.id)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        })?;
+    let protocol = plan::protocol(&args.protocol).ok_or_else(|| {
+        not_one_of(
+            "--protocol",
+            &args.protocol,
+            plan::PROTOCOLS.iter().map(|p| p.id),
+        )
+    })?;
     let columns = if args.columns.is_empty() {
         plan::COLUMNS.iter().collect()
     } else {
         args.columns
             .iter()
             .map(|id| {
-                plan::column(id).ok_or_else(|| reproduce::ReproError::Argument {
-                    arg: "--columns",
-                    message: format!(
-                        "{id:?} is not one of {}",
-                        plan::COLUMNS
-                            .iter()
-                            .map(|c| c.id)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                })
+                plan::column(id)
+                    .ok_or_else(|| not_one_of("--columns", id, plan::COLUMNS.iter().map(|c| c.id)))
             })
             .collect::<Result<Vec<_>, _>>()?
     };

@@ -292,6 +292,7 @@ fn bad_arguments_are_errors_that_name_the_argument() {
         (&["--seeds", "0"][..], "--seeds"),
         (&["--dataset", "swing"][..], "--dataset"),
         (&["--protocol", "nope"][..], "--protocol"),
+        (&["--columns", "ours,mine"][..], "--columns"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
             .args(["reproduce", "--quiet", "--report-only", "--work"])
@@ -302,5 +303,12 @@ fn bad_arguments_are_errors_that_name_the_argument() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{args:?} was accepted");
         assert!(stderr.contains(named), "{args:?}: {stderr}");
+        // An unknown name is quoted beside the known ones.
+        if named == "--columns" {
+            assert!(
+                stderr.contains("\"mine\"") && stderr.contains("no-pool"),
+                "{stderr}"
+            );
+        }
     }
 }
