@@ -216,6 +216,8 @@ impl ScheduleState {
         self.rollbacks += 1;
         self.since_best = 0;
         self.since_cut = 0;
+        // The average took in the losses of the blow-up.
+        self.smoothed = f64::INFINITY;
     }
 
     /// Whether the loss was still reaching new bests recently: within the last `patience`

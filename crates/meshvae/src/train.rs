@@ -26,7 +26,7 @@ use crate::adam::Adam;
 use crate::checkpoint::{Checkpoint, Progress};
 use crate::config::ModelConfig;
 use crate::data::MeshData;
-use crate::error::{Result, VaeError};
+use crate::error::Result;
 use crate::folder::{ModelFolder, TrainConfig};
 use crate::loss::LossWeights;
 use crate::model::MeshVae;
@@ -43,11 +43,13 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod epoch_log;
+mod rollback;
 mod setup;
 mod status;
 
 pub use epoch_log::read_log;
 use epoch_log::{append_log, truncate_log};
+use rollback::Recovery;
 use setup::{fresh_setup, resume_setup, write_model_files};
 pub use status::{RunStatus, read_status};
 
@@ -394,27 +396,22 @@ pub fn train(
             }
         }
         if let Some(what) = divergence {
-            // Back to the best weights at half the rate, moments forgotten; the epoch is
-            // trained again (with the next shuffle).
+            // Back to the best weights at half the rate; the epoch is trained again (with the
+            // next shuffle).
             drop(engine);
-            if progress.schedule.rollbacks >= MAX_ROLLBACKS || progress.best_epoch == 0 {
+            let best = best.as_ref();
+            let recovery = Recovery {
+                what,
+                best,
+                weights: &folder.weights(),
+                schedule: &schedule,
+                base_lr,
+            };
+            if let Err(e) = recovery.apply(&mut model, &mut adam, &mut progress) {
                 bar.abandon();
-                return Err(VaeError::Diverged(format!(
-                    "{what}, after {} restarts from the best weights at a smaller learning \
-                     rate; the checkpoint of epoch {} is kept — try a smaller learning rate \
-                     (--lr)",
-                    progress.schedule.rollbacks, progress.epoch
-                )));
+                return Err(e);
             }
-            restore_best(&mut model, best.as_ref(), &folder.weights())?;
-            adam.restart()?;
-            progress.schedule.rollback();
-            let message = format!(
-                "warning: {what}; training goes on from the weights of epoch {} at half the \
-                 learning rate ({:.1e})",
-                progress.best_epoch,
-                progress.schedule.lr(&schedule, base_lr, u64::MAX)
-            );
+            let message = recovery.message(&progress);
             // A hidden bar prints nothing, and a recovered divergence must not pass unseen.
             if bar.is_hidden() {
                 eprintln!("{message}");
@@ -538,28 +535,6 @@ pub fn train(
         selected_on: selection,
         seconds: start.elapsed().as_secs_f64(),
     })
-}
-
-/// Restarts from the best weights this many times before a diverging run is given up.
-const MAX_ROLLBACKS: usize = 3;
-
-/// Puts the best weights back into `model`: the copy kept in memory, else the weights file
-/// (written at every new best when the model is too large to keep, and at checkpoints).
-fn restore_best(
-    model: &mut MeshVae,
-    kept: Option<&std::collections::BTreeMap<String, candle_core::Tensor>>,
-    path: &Path,
-) -> Result<()> {
-    match kept {
-        Some(tensors) => {
-            let tensors: std::collections::HashMap<_, _> = tensors
-                .iter()
-                .map(|(k, v)| (k.clone(), v.clone()))
-                .collect();
-            model.set_tensors(&tensors, path)
-        }
-        None => model.load(path),
-    }
 }
 
 /// A copy of the model's tensors if small enough to keep in memory until the next checkpoint;
