@@ -2,7 +2,7 @@
 //! Cholesky with AMD ordering), then solved many times.
 //!
 //! Parallelism is fixed to `Par::Seq` on purpose: on a 2-core machine faer's default (rayon)
-//! makes a 3-column solve 5–10× slower (docs: ../shared/notes/dependencies.md §4). Callers
+//! makes a 3-column solve 5–10× slower (measured with faer 0.24). Callers
 //! parallelise across shapes instead.
 
 use crate::error::FeatureError;

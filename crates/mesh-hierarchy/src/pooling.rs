@@ -124,8 +124,8 @@ pub enum DepoolMode {
     /// Copy the coarse value to every member: D[v, c] = 1, so P·D = I.
     #[default]
     Copy,
-    /// The authors' code: D = Pᵀ, the coarse value divided by the cluster size
-    /// (/work/shared/notes/authors-code.md §2.3).
+    /// The authors' code: D = Pᵀ, the coarse value divided by the cluster size (their
+    /// de-pooling multiplies by the pooling matrix's transpose).
     Transpose,
 }
 

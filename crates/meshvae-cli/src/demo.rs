@@ -71,7 +71,7 @@ fn run_as<A: Args + FromArgMatches>(
             }
         })
         .collect();
-    println!("\n$ meshvae {name} {}", shown.join(" "));
+    out!("\n$ meshvae {name} {}", shown.join(" "));
     let command = A::augment_args(clap::Command::new(name).no_binary_name(true));
     let parsed = command
         .try_get_matches_from(argv)
@@ -162,7 +162,7 @@ fn write_set(dir: &Path, seed: u64, tiny: bool) -> Result<(usize, String, String
     };
     let bent = strongest(ShapeKind::Bend, |p| p.bend)?;
     let twisted = strongest(ShapeKind::Twist, |p| p.twist)?;
-    println!(
+    out!(
         "wrote {} synthetic capsules of {} vertices (labels bend / twist) to {}",
         synth.set.len(),
         synth.set.vertex_count(),
@@ -181,10 +181,10 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
     let path = |name: &str| out.join(name);
     let seed = args.seed.to_string();
 
-    println!("1. A synthetic mesh set: capsules that bend or twist, one connectivity.");
+    out!("1. A synthetic mesh set: capsules that bend or twist, one connectivity.");
     let (meshes, bent, twisted) = write_set(&path("set"), args.seed, args.tiny)?;
 
-    println!(
+    out!(
         "\n2. Training the mesh VAE: ACAP deformation features of every mesh, the pooling \
          hierarchy (edge contraction), then {} epochs on half of the meshes.",
         args.epochs
@@ -205,10 +205,10 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
     }
     run_as("train", &train_argv, train::run_train)?;
 
-    println!("\n3. Evaluation on the meshes training never saw, beside the mean training shape.");
+    out!("\n3. Evaluation on the meshes training never saw, beside the mean training shape.");
     run_as("eval", &argv![path("model")], crate::eval::run_eval)?;
 
-    println!("\n4. New shapes: z ~ N(0, I), decoded, each beside its nearest training mesh.");
+    out!("\n4. New shapes: z ~ N(0, I), decoded, each beside its nearest training mesh.");
     run_as(
         "generate",
         &argv![
@@ -224,7 +224,7 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
         generate::run,
     )?;
 
-    println!("\n5. Interpolation in latent space from the most bent to the most twisted capsule.");
+    out!("\n5. Interpolation in latent space from the most bent to the most twisted capsule.");
     run_as(
         "interpolate",
         &argv![
@@ -241,21 +241,21 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
         interpolate::run,
     )?;
 
-    println!("\n6. The set embedded in 2-D: latent means beside PCA and t-SNE of the features.");
+    out!("\n6. The set embedded in 2-D: latent means beside PCA and t-SNE of the features.");
     run_as(
         "embed",
         &argv![path("model"), "--out", path("embedding"), "--seed", &seed],
         embed::run,
     )?;
 
-    println!("\n7. Reconstructions of the test meshes, coloured by their error.");
+    out!("\n7. Reconstructions of the test meshes, coloured by their error.");
     run_as(
         "reconstruct",
         &argv![path("model"), "--out", path("reconstruction"), "--sheet"],
         train::run_reconstruct,
     )?;
 
-    println!("\n8. A picture of the whole set.");
+    out!("\n8. A picture of the whole set.");
     run_as(
         "render",
         &argv![path("set"), "--out", path("set.png"), "--size", "160"],
@@ -264,29 +264,29 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
 
     let seconds = start.elapsed().as_secs_f64();
     let d = out.display();
-    println!(
+    out!(
         "\nDone in {:.0} min {:02.0} s. Everything is in {d}/:",
         (seconds / 60.0).floor(),
         seconds % 60.0
     );
-    println!(
+    out!(
         "  pictures (PNG; any image viewer or web browser): set.png (all {meshes} \
          meshes), generated/sheet.png, interpolation/strip.png, embedding/embedding.png, \
          reconstruction/sheet.png"
     );
-    println!(
+    out!(
         "  meshes (OBJ; MeshLab, Blender: File > Import > Wavefront, or any 3-D viewer): set/, \
          generated/, interpolation/, reconstruction/"
     );
-    println!(
+    out!(
         "  animation (GLB; Blender: File > Import > glTF, or a web glTF viewer): \
          interpolation/interpolation.glb plays the interpolation"
     );
-    println!(
+    out!(
         "  reports (CSV / JSON; a spreadsheet or text editor): generated/report.csv, \
          embedding/embedding.csv, interpolation/interpolation.json"
     );
-    println!(
+    out!(
         "  the model (a folder for the meshvae commands): model/, e.g. `meshvae generate \
          {d}/model -n 20 --out more --sheet`"
     );

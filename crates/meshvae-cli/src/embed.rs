@@ -140,7 +140,7 @@ pub fn run(args: &EmbedArgs) -> Result<(), CliError> {
         ),
     )?;
     write_png(&args.out.join("embedding.png"), &picture)?;
-    println!(
+    out!(
         "wrote embedding.csv and embedding.png ({} meshes) to {}",
         e.names.len(),
         args.out.display()
@@ -152,7 +152,7 @@ pub fn run(args: &EmbedArgs) -> Result<(), CliError> {
         ("t-SNE", &e.tsne_2d),
     ] {
         if let Ok(m) = loop_measure(points) {
-            println!(
+            out!(
                 "  {label:<6} loop measure: {:.0} % of consecutive steps shorter than the median \
                  pair, closing step {:.2} × the median step{}",
                 100.0 * m.nearer,

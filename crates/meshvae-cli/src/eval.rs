@@ -85,29 +85,35 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
     if args.json {
         let text = serde_json::to_string_pretty(&value)
             .map_err(|e| CliError::argument("--json", e.to_string()))?;
-        println!("{text}");
+        out!("{text}");
         return Ok(());
     }
-    println!("{}", args.model.display());
+    out!("{}", args.model.display());
     if trained.selected_on == meshvae::Selection::Test {
-        println!(
+        out!(
             "  SELECTED ON TEST: these weights had the lowest loss on the test meshes (the \
              authors' protocol); the test errors below are not errors on unseen data"
         );
     }
-    println!(
+    out!(
         "  test RMS     {:.6} ({:.4} ×1000, {:.3e} of the bbox diagonal) over {} meshes",
-        report.test.rms, report.test.rms_x1000, report.test.rms_rel, report.test.meshes
+        report.test.rms,
+        report.test.rms_x1000,
+        report.test.rms_rel,
+        report.test.meshes
     );
-    println!(
+    out!(
         "  train RMS    {:.6} ({:.3e} of the diagonal) over {} meshes",
-        report.train.rms, report.train.rms_rel, report.train.meshes
+        report.train.rms,
+        report.train.rms_rel,
+        report.train.meshes
     );
-    println!(
+    out!(
         "  mean shape   {:.6} ({:.3e}): the trivial predictor, on the test meshes",
-        report.mean_shape.rms, report.mean_shape.rms_rel
+        report.mean_shape.rms,
+        report.mean_shape.rms_rel
     );
-    println!(
+    out!(
         "  mean dist.   {:.6} test, {:.6} mean shape (per-vertex, rigidly aligned as the authors' \
          script; {:.6} test with centroids aligned only)",
         report.test.mean_distance_rigid,
@@ -115,7 +121,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         report.test.mean_distance
     );
     if let Some(seen) = copy_in_training {
-        println!(
+        out!(
             "  of which     {:.6} over the {} test meshes whose shape a training mesh repeats \
              (memory), {} over the {} others (generalisation)",
             seen.mean_distance_rigid,
@@ -124,11 +130,12 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
             unseen.map_or(0, |r| r.meshes),
         );
     }
-    println!(
+    out!(
         "  parameters   {} ({} without biases)",
-        report.params.with_biases, report.params.without_biases
+        report.params.with_biases,
+        report.params.without_biases
     );
-    println!(
+    out!(
         "  epochs       {} (weights of epoch {}, chosen on the {} loss; {} validation meshes)",
         epochs.0,
         epochs.1,
@@ -136,7 +143,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         trained.split.val.len()
     );
     match &status {
-        Some(s) => println!(
+        Some(s) => out!(
             "  stopped      {}{} after {} steps, {:.0} s of training ({} path){}",
             s.stop_reason,
             if s.stop_reason == meshvae::StopReason::Budget && s.still_improving {
@@ -153,12 +160,12 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
                 String::new()
             }
         ),
-        None => println!("  stopped      {stop_reason} (a model trained before run.json)"),
+        None => out!("  stopped      {stop_reason} (a model trained before run.json)"),
     }
     if let Some(path) = &loss_plot {
-        println!("  loss curves  {}", path.display());
+        out!("  loss curves  {}", path.display());
     }
-    println!(
+    out!(
         "  split        {}",
         if trained.spec.train.split_by_shape {
             "random, by shape (copies of one shape on one side)"

@@ -116,14 +116,14 @@ pub fn run_features(args: &FeaturesArgs) -> Result<(), CliError> {
         ]),
     };
     save_features(&args.out, &file)?;
-    println!(
+    out!(
         "{}: {} frames × {} vertices × 9 features in {seconds:.3} s → {}",
         args.set.display(),
         set.len(),
         set.vertex_count(),
         args.out.display()
     );
-    println!(
+    out!(
         "  rotation range [{:.6}, {:.6}], stretch range [{:.6}, {:.6}]{}",
         normalization.rotation_min,
         normalization.rotation_max,
@@ -247,27 +247,31 @@ pub fn run_roundtrip(args: &RoundtripArgs) -> Result<(), CliError> {
     if args.json {
         let text = serde_json::to_string_pretty(&report)
             .map_err(|e| CliError::argument("--json", e.to_string()))?;
-        println!("{text}");
+        out!("{text}");
     } else {
-        println!("{}", args.set.display());
-        println!(
+        out!("{}", args.set.display());
+        out!(
             "  frames × vertices    {} × {}",
-            report.frames, report.vertices
+            report.frames,
+            report.vertices
         );
-        println!(
+        out!(
             "  rms / max            {:.3e} / {:.3e}",
-            report.rms, report.max
+            report.rms,
+            report.max
         );
-        println!(
+        out!(
             "  rms_rel / max_rel    {:.3e} / {:.3e} (of the bounding-box diagonal)",
-            report.rms_rel, report.max_rel
+            report.rms_rel,
+            report.max_rel
         );
-        println!(
+        out!(
             "  worst frame          {} (rms_rel {:.3e})",
-            report.worst_frame, report.worst_frame_rms_rel
+            report.worst_frame,
+            report.worst_frame_rms_rel
         );
         let w = &report.worst_vertex;
-        println!(
+        out!(
             "  worst vertex         {} in frame {} ({:.3e}, degree {}, {})",
             w.vertex,
             w.frame,
@@ -275,9 +279,10 @@ pub fn run_roundtrip(args: &RoundtripArgs) -> Result<(), CliError> {
             w.degree,
             if w.boundary { "boundary" } else { "interior" }
         );
-        println!(
+        out!(
             "  seconds              features {:.3}, reconstruct {:.3}",
-            report.seconds_features, report.seconds_reconstruct
+            report.seconds_features,
+            report.seconds_reconstruct
         );
     }
     if args.worst > 0 {

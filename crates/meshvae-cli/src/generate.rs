@@ -238,20 +238,20 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
         .map(|n| n.distance_rel)
         .sum::<f64>()
         / args.count as f64;
-    println!(
+    out!(
         "wrote {} generated meshes, report.json and report.csv{} to {}",
         args.count,
         if sheet.is_some() { ", sheet.png" } else { "" },
         args.out.display()
     );
-    println!("mean distance to the nearest training mesh: {mean:.3e} of the template's diagonal");
+    out!("mean distance to the nearest training mesh: {mean:.3e} of the template's diagonal");
     if let (Some(label), Some(share)) = (label, share) {
         let hits = generated
             .nearest
             .iter()
             .filter(|n| n.label.as_deref() == Some(label))
             .count();
-        println!(
+        out!(
             "label {label}: {hits} of {} samples ({:.0} %) have their nearest training mesh \
              labelled {label}",
             args.count,

@@ -22,24 +22,24 @@ pub fn run(args: &InfoArgs) -> Result<(), CliError> {
     if args.json {
         let text = serde_json::to_string_pretty(&report)
             .map_err(|e| CliError::argument("--json", e.to_string()))?;
-        println!("{text}");
+        out!("{text}");
         return Ok(());
     }
-    println!("{}", args.set.display());
-    println!("  meshes               {}", report.meshes);
-    println!("  vertices             {}", report.vertices);
-    println!("  faces                {}", report.faces);
-    println!("  edges                {}", report.edges);
-    println!("  boundary edges       {}", report.boundary_edges);
-    println!("  non-manifold edges   {}", report.nonmanifold_edges);
-    println!("  degenerate faces     {}", report.degenerate_faces);
-    println!("  components           {}", report.components);
-    println!("  unused vertices      {}", report.unused_vertices);
-    println!("  Euler characteristic {}", report.euler_characteristic);
-    println!("  bbox diagonal        {:.6}", report.bbox_diagonal);
+    out!("{}", args.set.display());
+    out!("  meshes               {}", report.meshes);
+    out!("  vertices             {}", report.vertices);
+    out!("  faces                {}", report.faces);
+    out!("  edges                {}", report.edges);
+    out!("  boundary edges       {}", report.boundary_edges);
+    out!("  non-manifold edges   {}", report.nonmanifold_edges);
+    out!("  degenerate faces     {}", report.degenerate_faces);
+    out!("  components           {}", report.components);
+    out!("  unused vertices      {}", report.unused_vertices);
+    out!("  Euler characteristic {}", report.euler_characteristic);
+    out!("  bbox diagonal        {:.6}", report.bbox_diagonal);
     match &report.labels {
-        Some(labels) => println!("  labels               {}", labels.join(", ")),
-        None => println!("  labels               none"),
+        Some(labels) => out!("  labels               {}", labels.join(", ")),
+        None => out!("  labels               none"),
     }
     Ok(())
 }

@@ -98,7 +98,7 @@ pub fn run(args: &InterpolateArgs) -> Result<(), CliError> {
             "latents": seq.latents,
         }),
     )?;
-    println!(
+    out!(
         "wrote {} meshes from {from_name} to {to_name}, interpolation.glb, strip.png and \
          interpolation.json to {}",
         args.steps,

@@ -5,6 +5,18 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+/// `println!` for the commands' results: where standard output cannot be written (a full
+/// disk, `> /dev/full`) the command ends with an error message and exit code 1 instead of a
+/// panic.
+macro_rules! out {
+    () => {
+        $crate::write_stdout(format_args!(""))
+    };
+    ($($arg:tt)*) => {
+        $crate::write_stdout(format_args!($($arg)*))
+    };
+}
+
 mod demo;
 mod embed;
 mod error;
@@ -104,6 +116,20 @@ fn restore_default_sigpipe() {
     // SAFETY: called first thing in `main`, before any thread exists; SIG_DFL is a valid action.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+/// One line of [`out!`].
+fn write_stdout(line: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    let written = stdout
+        .write_fmt(line)
+        .and_then(|()| stdout.write_all(b"\n"))
+        .and_then(|()| stdout.flush());
+    if let Err(e) = written {
+        eprintln!("error: cannot write to standard output: {e}");
+        std::process::exit(1);
     }
 }
 

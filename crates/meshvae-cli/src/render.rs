@@ -258,7 +258,7 @@ pub fn run(args: &RenderArgs) -> Result<(), CliError> {
         image = mesh_render::with_colorbar(&image, max, "distance to ground truth")?;
     }
     image.save_png(&args.out)?;
-    println!(
+    out!(
         "{} -> {} ({}x{}, {} mesh{})",
         args.input.display(),
         args.out.display(),
@@ -269,7 +269,7 @@ pub fn run(args: &RenderArgs) -> Result<(), CliError> {
     );
     if let (Some(max), Some(errors)) = (max_error, &errors) {
         let largest = errors.iter().flatten().copied().fold(0.0f32, f32::max);
-        println!(
+        out!(
             "  largest error {} (colour scale 0..{})",
             short(largest),
             short(max)

@@ -83,41 +83,45 @@ pub fn run(args: &SimplifyArgs) -> Result<(), CliError> {
     if args.json {
         let text = serde_json::to_string_pretty(&report)
             .map_err(|e| CliError::argument("--json", e.to_string()))?;
-        println!("{text}");
+        out!("{text}");
         return Ok(());
     }
-    println!("{} -> {}", args.input.display(), args.out.display());
-    println!("  method               {}", report.method.as_str());
-    println!(
+    out!("{} -> {}", args.input.display(), args.out.display());
+    out!("  method               {}", report.method.as_str());
+    out!(
         "  vertices             {} -> {}",
-        report.vertices_in, report.vertices_out
+        report.vertices_in,
+        report.vertices_out
     );
-    println!(
+    out!(
         "  faces                {} -> {}",
-        report.faces_in, report.faces_out
+        report.faces_in,
+        report.faces_out
     );
     match report.lambda {
-        Some(lambda) => println!("  lambda               {lambda}"),
-        None => println!("  lambda               -"),
+        Some(lambda) => out!("  lambda               {lambda}"),
+        None => out!("  lambda               -"),
     }
-    println!(
+    out!(
         "  edge-length CV       {:.4} -> {:.4}",
-        report.edge_cv_in, report.edge_cv
+        report.edge_cv_in,
+        report.edge_cv
     );
-    println!("  cluster-size CV      {:.4}", report.cluster_cv);
-    println!("  largest cluster      {}", report.cluster_max);
-    println!("  manifold             {}", report.manifold);
-    println!("  flipped faces        {}", report.flipped_faces);
-    println!("  degenerate faces     {}", report.degenerate_faces);
-    println!(
+    out!("  cluster-size CV      {:.4}", report.cluster_cv);
+    out!("  largest cluster      {}", report.cluster_max);
+    out!("  manifold             {}", report.manifold);
+    out!("  flipped faces        {}", report.flipped_faces);
+    out!("  degenerate faces     {}", report.degenerate_faces);
+    out!(
         "  Euler characteristic {} -> {}",
-        report.euler_in, report.euler_out
+        report.euler_in,
+        report.euler_out
     );
-    println!(
+    out!(
         "  geometric error      {:.3e} of the diagonal (RMS)",
         report.geometric_error_rel
     );
-    println!("  seconds              {:.3}", report.seconds);
+    out!("  seconds              {:.3}", report.seconds);
     Ok(())
 }
 

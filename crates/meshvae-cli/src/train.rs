@@ -91,9 +91,9 @@ pub struct TrainArgs {
     /// [default: 0.1].
     #[arg(long)]
     val_fraction: Option<f64>,
-    /// Draw the random test and validation meshes one by one, even where the set holds the
-    /// same shape more than once (by default copies of a shape stay on one side, so no test
-    /// shape is also a training mesh).
+    /// Draw the random test meshes one by one, even where the set holds the same shape more
+    /// than once, as the paper's authors did (by default copies of a shape stay on one side,
+    /// so no test shape is also a training mesh). Validation shapes are still drawn whole.
     #[arg(long)]
     split_by_mesh: bool,
     /// Train a conditional VAE on these labels: a CSV of `file,label` lines, one per mesh
@@ -320,7 +320,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         .as_ref()
         .map_or(0, |r| r.epoch)
         .max(summary.best_epoch);
-    println!(
+    out!(
         "trained {} epoch(s) in {:.1} s ({} of at most {} epochs, {} steps, {:.0} s in all); best \
          epoch {} ({} loss {:.4})",
         summary.epochs_run,
@@ -334,9 +334,11 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         summary.best_loss
     );
     match summary.stop_reason {
-        meshvae::StopReason::Converged => println!(
+        meshvae::StopReason::Converged => out!(
             "stopped: converged (no new best {} loss for {} steps; learning rate now {:.2e})",
-            summary.selected_on, request.train.schedule.patience, summary.lr
+            summary.selected_on,
+            request.train.schedule.patience,
+            summary.lr
         ),
         _ if summary.still_improving => eprintln!(
             "warning: stopped by the budget ({} steps) while the {} loss was still improving: \
@@ -347,16 +349,16 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
             args.set.display(),
             args.out.display()
         ),
-        _ => println!("stopped: budget (the loss had stopped improving)"),
+        _ => out!("stopped: budget (the loss had stopped improving)"),
     }
     match crate::loss_plot::write_loss_plot(&folder) {
-        Ok(path) => println!("loss curves: {}", path.display()),
+        Ok(path) => out!("loss curves: {}", path.display()),
         Err(e) => eprintln!("warning: no loss.png: {e}"),
     }
     if !conditional.is_empty() {
-        println!("conditional on the labels {}", conditional.join(", "));
+        out!("conditional on the labels {}", conditional.join(", "));
     }
-    println!("model: {}", args.out.display());
+    out!("model: {}", args.out.display());
     Ok(())
 }
 
@@ -414,7 +416,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
     if let Some(sheet) = &sheet {
         sheet.save_png(&args.out.join("sheet.png"))?;
     }
-    println!(
+    out!(
         "wrote {} reconstructed meshes{} to {}",
         meshes.len(),
         if sheet.is_some() {

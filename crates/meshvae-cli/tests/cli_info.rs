@@ -176,3 +176,28 @@ fn pack_then_info_reads_the_cache() {
     assert_fails_with(&meshvae(&["info", cache.to_str().unwrap()]), &["set.mvset"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_full_disk_on_standard_output_is_an_error_not_a_panic() {
+    let full = Path::new("/dev/full");
+    if !full.exists() {
+        eprintln!("skipped: this system has no /dev/full");
+        return;
+    }
+    let dir = scratch("devfull");
+    write(&dir, "a.obj", TRI);
+    write(&dir, "b.obj", TRI);
+    for json in [false, true] {
+        let mut args = vec!["info", dir.to_str().unwrap()];
+        if json {
+            args.push("--json");
+        }
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_meshvae"))
+            .args(&args)
+            .stdout(std::fs::File::create(full).unwrap())
+            .output()
+            .unwrap();
+        assert_fails_with(&out, &["cannot write to standard output"]);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

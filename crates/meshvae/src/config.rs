@@ -90,7 +90,7 @@ names!(PoolKind, "pool", Mean => "mean", Max => "max", Qem => "qem", Sampling =>
     None => "none", Graph => "graph", Remesh => "remesh");
 
 /// The network's configuration. `Default` is the paper's network as the authors' code runs it
-/// (see /work/shared/notes/authors-code.md §4), except `last_encoder_linear`, which follows the
+/// (its released TensorFlow code), except `last_encoder_linear`, which follows the
 /// paper's text.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModelConfig {

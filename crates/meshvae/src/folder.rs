@@ -58,10 +58,11 @@ pub struct TrainConfig {
     /// validation sets existed read as 0.
     #[serde(default)]
     pub val_fraction: f64,
-    /// Draw the random test and validation sets by shape, not by mesh: meshes with the same
-    /// vertex positions (a cycle stored twice, as horse-gallop's 48 meshes are) always land on
-    /// the same side, so no test shape has a copy among the training meshes. A set without
-    /// repeats splits exactly as by mesh. Models saved before this option read as false.
+    /// Draw the random test set by shape, not by mesh: meshes with the same vertex positions (a
+    /// cycle stored twice, as horse-gallop's 48 meshes are) always land on the same side, so
+    /// no test shape has a copy among the training meshes. A set without repeats splits
+    /// exactly as by mesh. Models saved before this option read as false. (The validation set
+    /// is drawn by shape either way, so that its loss measures poses the network has not seen.)
     #[serde(default)]
     pub split_by_shape: bool,
     /// Learning-rate schedule and early stop. Models saved before schedules existed read as

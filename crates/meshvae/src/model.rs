@@ -1,5 +1,4 @@
-//! [`MeshVae`]: the network (the paper's Fig. 2 as the authors' code runs it, see
-//! /work/shared/notes/authors-code.md §4).
+//! [`MeshVae`]: the network (the paper's Fig. 2 as the authors' released code runs it).
 //!
 //! Encoder: the structure's convolutions and poolings on the hierarchy's levels (conv → batch
 //! norm → tanh; the last convolution without batch norm and, by default, linear), flatten

@@ -464,18 +464,27 @@ fn copies_of_one_shape_stay_on_one_side_of_the_split() {
     let report = trained.evaluate(&twice, &Device::Cpu).unwrap();
     assert_eq!(report.copies, None, "no test shape is trained on");
 
-    // Opting out draws mesh by mesh, exactly the plain random split.
+    // Opting out draws the test meshes one by one, exactly the plain random split...
     req.train.split_by_shape = false;
     train(&req, &options(false, true), |_| {}).unwrap();
     let file: SplitFile = folder.read_json(&folder.split()).unwrap();
-    let plain = Split::random(2 * n, 0.5, req.train.seed)
-        .unwrap()
-        .with_validation(0.25, req.train.seed)
-        .unwrap();
+    let plain = Split::random(2 * n, 0.5, req.train.seed).unwrap();
     assert!(!file.by_shape && file.repeated_shapes.is_empty());
-    assert_eq!(file.split(), plain);
-    // Evaluation tells the test meshes whose copy trained from the others.
+    assert_eq!(file.test, plain.test);
+    let mut trained_or_val = [file.train.clone(), file.val.clone()].concat();
+    trained_or_val.sort_unstable();
+    assert_eq!(trained_or_val, plain.train);
+    // ...but validation shapes stay whole: no validation mesh has its copy among the training
+    // meshes, so the validation loss measures unseen poses.
     let twin = |i: usize| (i + n) % (2 * n);
+    assert!(!file.val.is_empty());
+    for &i in &file.val {
+        assert!(
+            !file.train.contains(&twin(i)),
+            "{i}'s copy trains: {file:?}"
+        );
+    }
+    // Evaluation tells the test meshes whose copy trained from the others.
     let with_copy = file
         .test
         .iter()

@@ -200,7 +200,12 @@ pub fn load(dataset: &'static Dataset, quick: bool) -> Result<LoadedSet, ReproEr
             let set = mesh_io::load_set(&dir)
                 .map_err(|e| fail(e.to_string()))?
                 .value;
-            let how = format!("`{}`", dir.display());
+            // The folder's name only: the page must not carry this machine's paths.
+            let how = format!(
+                "`{}/` of the data sets folder",
+                dir.file_name()
+                    .map_or(dataset.name.into(), |n| n.to_string_lossy())
+            );
             (set, std::fs::canonicalize(&dir).ok(), how)
         }
     };

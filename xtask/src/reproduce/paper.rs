@@ -3,7 +3,7 @@
 //!
 //! The paper calls all of them "RMS reconstruction errors for unseen data"; the authors' shipped
 //! evaluation (`show_error.m`) computes a rigidly aligned *mean per-vertex distance*, which is
-//! the closest of our measures to them (`../shared/notes/authors-code.md` §6).
+//! the closest of our measures to them.
 
 /// The columns of the paper's ablation table (`table:different_sim`), in its order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -57,7 +57,7 @@ pub const OURS: &str = "ours";
 
 /// Every column, in table order. "Only Spatial Conv." and "Only Spectral Conv." have no
 /// pooling (the paper: "'Only Spectral Conv.' also means 'No Pooling'"; the authors' code's
-/// no-pooling network, `../shared/notes/authors-code.md` §4.5).
+/// no-pooling network).
 pub const COLUMNS: &[Column] = &[
     Column {
         id: "spatial",
@@ -189,7 +189,7 @@ pub const PROTOCOLS: &[Protocol] = &[
         id: "select-on-test",
         description: "the authors' protocol: the whole training half trains and the reported \
                       weights are those of the epoch with the lowest loss on the test meshes \
-                      (`../shared/notes/authors-code.md` §5.4), so the test set takes part in \
+                      (as its evaluation script picks it), so the test set takes part in \
                       choosing the checkpoint; the numbers are not errors on unseen data",
         configure: authors_protocol,
         select_on_test: true,

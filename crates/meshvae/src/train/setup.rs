@@ -21,23 +21,27 @@ pub(super) fn fresh_setup(
 ) -> Result<(ModelSpec, Hierarchy, MeshData, NewFiles)> {
     let set = request.set;
     let train = &request.train;
+    let shapes = set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)?;
     // Singletons split exactly as mesh by mesh, so one code path serves both settings.
-    let groups = if train.split_by_shape {
-        set.shape_groups(ShapeGroups::DEFAULT_TOLERANCE)?
+    let test_groups = if train.split_by_shape {
+        shapes.clone()
     } else {
         ShapeGroups::singletons(set.len())
     };
+    // Validation is drawn by shape even when the test set is drawn by mesh: a validation mesh
+    // whose copy trains measures memory, not unseen poses, so its loss keeps improving long
+    // after the test error has stopped, and the stop rule waits for it.
     let split = match &request.split {
         Some(s) => {
             s.check(set.len())?;
             s.clone()
         }
-        None => Split::random_by_shape(&groups, train.test_fraction, train.seed)?,
+        None => Split::random_by_shape(&test_groups, train.test_fraction, train.seed)?,
     }
-    .with_validation_by_shape(&groups, train.val_fraction, train.seed)?;
+    .with_validation_by_shape(&shapes, train.val_fraction, train.seed)?;
     let mut split_file = SplitFile::new(&split, set.names());
     if train.split_by_shape {
-        split_file = split_file.with_shapes(&groups);
+        split_file = split_file.with_shapes(&test_groups);
     }
     let labels = mesh_labels(&request.model, set, &split)?;
     prepare_out_dir(folder, force)?;

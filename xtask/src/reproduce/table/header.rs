@@ -120,10 +120,11 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     md.push_str(
         "\nMeasures, on the test meshes: **RMS** = sqrt(Σ‖v − v̂‖² / (3·N·V)) after aligning \
          centroids, in mesh units; **rel** = RMS / the bounding-box diagonal; **mean dist** = \
-         mean per-vertex Euclidean distance (the measure of the authors' `show_error.m`, \
-         without its rigid alignment). The paper calls its numbers RMS errors, but they are most \
-         likely `show_error.m`'s mean distances (`../shared/notes/authors-code.md` §6), so the \
-         paper's figures stand beside our mean dist. Every number is mean ± sample standard \
+         mean per-vertex Euclidean distance after aligning centroids; **mean dist, rigid** = \
+         the same after the best rotation and translation (Kabsch), the measure of the authors' \
+         evaluation script `show_error.m`. The paper calls its numbers RMS errors, but the \
+         authors' released evaluation computes rigidly aligned mean distances, so the paper's \
+         figures stand beside our rigid mean dist. Every number is mean ± sample standard \
          deviation over the seeds. \"ours against it\" = (ours − it) / it on RMS.\n\n",
     );
 }
