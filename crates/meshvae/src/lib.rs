@@ -103,7 +103,7 @@ pub use params::{ParamCount, param_count};
 pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
 pub use reconstruct::{CopySplit, EvalReport};
 pub use rng::Rng;
-pub use schedule::{Decision, Schedule, ScheduleState, StopReason};
+pub use schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
 pub use split::{Selection, Split, resolve_mesh};
 pub use structure::{Layer, Structure};
 pub use train::{

@@ -136,7 +136,14 @@ pub struct ScheduleState {
     /// The moving average of the loss ([`Schedule::smoothing_steps`]; infinite before the
     /// first finite loss).
     pub smoothed: f64,
+    /// The optimizer step of the last rollback (0: none); the rate warms up again after it.
+    pub rewarm_from: u64,
 }
+
+/// After a rollback the rate rises linearly from 1/`REWARM_STEPS` of its value over this many
+/// steps. Adam restarts with empty moments, and its first steps then move every weight by the
+/// full rate whatever its gradient: at 5e-3 that alone broke samba (seed 3) again at once.
+pub const REWARM_STEPS: u64 = 100;
 
 impl Default for ScheduleState {
     fn default() -> Self {
@@ -148,6 +155,7 @@ impl Default for ScheduleState {
             cuts: 0,
             rollbacks: 0,
             smoothed: f64::INFINITY,
+            rewarm_from: 0,
         }
     }
 }
@@ -170,7 +178,12 @@ impl ScheduleState {
         } else {
             1.0
         };
-        base_lr * self.scale * warm
+        let rewarm = if self.rewarm_from > 0 && step > self.rewarm_from {
+            ((step - self.rewarm_from) as f64 / REWARM_STEPS as f64).min(1.0)
+        } else {
+            1.0
+        };
+        base_lr * self.scale * warm * rewarm
     }
 
     /// Takes an epoch of `steps` steps that ended with validation loss `loss`.
@@ -209,8 +222,11 @@ impl ScheduleState {
 
     /// After a divergence (a non-finite loss), when the weights go back to those of the best
     /// epoch: the rate is halved whatever the schedule (a step of that size just failed), and
-    /// the counts since the best start again, since the weights are the best's.
-    pub fn rollback(&mut self) {
+    /// the counts since the best start again, since the weights are the best's. `step` is the
+    /// optimizer's step count at the rollback: the rate warms up again after it
+    /// ([`REWARM_STEPS`]).
+    pub fn rollback(&mut self, step: u64) {
+        self.rewarm_from = step;
         self.scale *= 0.5;
         self.cuts += 1;
         self.rollbacks += 1;
@@ -241,6 +257,7 @@ impl ScheduleState {
             self.cuts as f64,
             self.rollbacks as f64,
             self.smoothed,
+            self.rewarm_from as f64,
         ]
     }
 
@@ -251,7 +268,7 @@ impl ScheduleState {
         else {
             return None;
         };
-        if v.len() > 7 {
+        if v.len() > 8 {
             return None;
         }
         Some(Self {
@@ -262,6 +279,7 @@ impl ScheduleState {
             cuts: cuts as usize,
             rollbacks: rollbacks.map_or(0, |&r| r as usize),
             smoothed: v.get(6).copied().unwrap_or(f64::INFINITY),
+            rewarm_from: v.get(7).map_or(0, |&s| s as u64),
         })
     }
 }
@@ -354,11 +372,20 @@ mod tests {
         st.update(&s, 10.0, 1);
         st.update(&s, 11.0, 7);
         assert_eq!(st.since_best, 7);
-        st.rollback();
-        st.rollback();
+        st.rollback(10);
+        st.rollback(20);
         assert_eq!((st.scale, st.cuts, st.rollbacks), (0.25, 2, 2));
+        // The rate warms up again from the last rollback, linearly over REWARM_STEPS.
+        let c = Schedule::constant();
+        assert_eq!(st.lr(&c, 1.0, 20), 0.25);
+        assert!((st.lr(&c, 1.0, 21) - 0.25 / REWARM_STEPS as f64).abs() < 1e-15);
+        let half = 20 + REWARM_STEPS / 2;
+        assert!((st.lr(&c, 1.0, half) - 0.125).abs() < 1e-15);
+        assert_eq!(st.lr(&c, 1.0, 20 + REWARM_STEPS), 0.25);
+        assert_eq!(st.lr(&c, 1.0, 1_000), 0.25);
+        assert_eq!(ScheduleState::from_slice(&st.to_vec()), Some(st));
         assert_eq!((st.since_best, st.since_cut, st.best), (0, 0, 10.0));
-        assert_eq!(st.lr(&s, 1e-2, 100), 2.5e-3);
+        assert_eq!(st.lr(&s, 1e-2, 1_000), 2.5e-3);
         let packed = st.to_vec();
         assert_eq!(ScheduleState::from_slice(&packed), Some(st));
         // A checkpoint from before rollbacks existed: five numbers.

@@ -103,6 +103,10 @@ pub struct TrainOptions {
     /// once, to exercise the recovery from a divergence.
     #[doc(hidden)]
     pub fail_step: Option<u64>,
+    /// Tests only: with `fail_step`, the first step after that rollback fails too (best
+    /// weights that cannot take a step).
+    #[doc(hidden)]
+    pub fail_after_rollback: bool,
 }
 
 impl Default for TrainOptions {
@@ -117,6 +121,7 @@ impl Default for TrainOptions {
             device: Device::Cpu,
             engine: true,
             fail_step: None,
+            fail_after_rollback: false,
         }
     }
 }
@@ -304,6 +309,9 @@ pub fn train(
         progress.epoch + 1
     };
 
+    // False between a rollback and the next epoch that finishes: a divergence then means the
+    // best weights themselves cannot train.
+    let mut trained_since_rollback = true;
     let mut epoch = first_epoch;
     while epoch <= epochs {
         let t0 = Instant::now();
@@ -330,11 +338,18 @@ pub fn train(
             let x = data.batch(chunk, device)?;
             let c = data.conditions(&model, chunk)?;
             let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
+            let step = adam.step_count() + 1;
             let diverged = |total: f64, rec: f64, kl: f64, l2: f64| {
-                format!("epoch {epoch}: the loss is {total} (rec {rec}, kl {kl}, l2 {l2})")
+                format!(
+                    "epoch {epoch} (step {step}): the loss is {total} (rec {rec}, kl {kl}, l2 {l2})"
+                )
             };
-            if options.fail_step == Some(adam.step_count() + 1) && progress.schedule.rollbacks == 0
-            {
+            let injected = match progress.schedule.rollbacks {
+                0 => options.fail_step == Some(step),
+                1 => options.fail_after_rollback && !trained_since_rollback,
+                _ => false,
+            };
+            if injected {
                 divergence = Some(format!("epoch {epoch}: the loss is NaN (injected)"));
                 break;
             }
@@ -393,16 +408,31 @@ pub fn train(
             // The last step can leave non-finite weights behind a finite training loss.
             if let Some(v) = val_loss.filter(|v| !v.is_finite()) {
                 divergence = Some(format!("epoch {epoch}: the validation loss is {v}"));
+            } else if let Some(name) = rollback::non_finite_weight(&model)? {
+                // The validation loss reads only the mean path: a broken σ branch passes it.
+                divergence = Some(format!("epoch {epoch}: weight {name} is not finite"));
             }
         }
         if let Some(what) = divergence {
             // Back to the best weights at half the rate; the epoch is trained again (with the
             // next shuffle).
             drop(engine);
+            // Best weights that diverge again before an epoch finishes are no place to go back
+            // to (seen on samba, seed 3, epoch 14: one training mesh's σ overflows with the
+            // weights of epoch 13 at any rate, and the validation pass, which reads only the
+            // mean, cannot see it): start again from the initial weights instead.
+            let initial = if trained_since_rollback {
+                None
+            } else {
+                let fresh = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
+                Some(rollback::tensors_of(&fresh))
+            };
+            trained_since_rollback = false;
             let best = best.as_ref();
             let recovery = Recovery {
                 what,
                 best,
+                initial: initial.as_ref(),
                 weights: &folder.weights(),
                 schedule: &schedule,
                 base_lr,
@@ -420,6 +450,7 @@ pub fn train(
             }
             continue;
         }
+        trained_since_rollback = true;
         // The schedule sees the loss that chooses the weights (validation, or training).
         let score = val_loss.unwrap_or(sums[0] / n);
         let decision = progress

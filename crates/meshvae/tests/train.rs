@@ -305,9 +305,23 @@ fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
     assert_eq!(epochs, (1..=8).collect::<Vec<_>>());
     let steps_per_epoch = log[0].step as usize;
     let failed_epoch = 8 / steps_per_epoch + 1;
+    // After the rollback (8 steps taken) the halved rate warms up again over REWARM_STEPS.
+    let rate = |step: u64| {
+        let rewarm = ((step - 8) as f64 / meshvae::REWARM_STEPS as f64).min(1.0);
+        (lr / 2.0) * rewarm
+    };
     for r in &log {
-        let expected = if r.epoch < failed_epoch { lr } else { lr / 2.0 };
-        assert_eq!(r.lr, Some(expected), "epoch {}", r.epoch);
+        let expected = if r.epoch < failed_epoch {
+            lr
+        } else {
+            rate(r.step)
+        };
+        let got = r.lr.unwrap();
+        assert!(
+            (got - expected).abs() <= 1e-12 * lr,
+            "epoch {}: {got} vs {expected}",
+            r.epoch
+        );
         assert!(r.train_loss.is_finite());
     }
     // The steps of the abandoned attempt count: the optimizer took them.
@@ -319,7 +333,40 @@ fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
     );
     let status = read_status(&ModelFolder::new(&out)).unwrap().unwrap();
     assert_eq!((status.rollbacks, status.lr_cuts), (1, 1));
-    assert_eq!(status.lr, lr / 2.0);
+    assert!((status.lr - rate(summary.steps)).abs() <= 1e-12 * lr);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Best weights that diverge again at their very first step cannot be gone back to: the run
+/// starts over from its initial weights (at a quarter of the rate after two rollbacks) and
+/// finishes.
+#[test]
+fn best_weights_that_cannot_take_a_step_give_way_to_the_initial_ones() {
+    let set = small_set(3, 8);
+    let out = scratch("rollback-initial");
+    let mut req = request(&set, &out, 8);
+    req.train.schedule = Schedule::constant();
+    let options = TrainOptions {
+        fail_step: Some(9),
+        fail_after_rollback: true,
+        ..options(false, false)
+    };
+    let summary = train(&req, &options, |_| {}).unwrap();
+    assert_eq!(summary.epochs_total, 8);
+    let log = read_log(&ModelFolder::new(&out).log()).unwrap();
+    let epochs: Vec<usize> = log.iter().map(|r| r.epoch).collect();
+    assert_eq!(epochs, (1..=8).collect::<Vec<_>>());
+    assert!(log.iter().all(|r| r.train_loss.is_finite()));
+    let status = read_status(&ModelFolder::new(&out)).unwrap().unwrap();
+    assert_eq!((status.rollbacks, status.lr_cuts), (2, 2));
+    // Started over: the first epoch after the restart fits worse than the epoch before the
+    // divergence did (the initial weights know nothing yet).
+    let steps_per_epoch = log[0].step as usize;
+    let failed_epoch = 8 / steps_per_epoch + 1;
+    assert!(
+        log[failed_epoch - 1].train_loss > log[failed_epoch - 2].train_loss,
+        "{log:?}"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 

@@ -9,7 +9,7 @@ use crate::checkpoint::Progress;
 use crate::error::{Result, VaeError};
 use crate::model::MeshVae;
 use crate::schedule::Schedule;
-use candle_core::Tensor;
+use candle_core::{DType, Tensor};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
@@ -22,6 +22,9 @@ pub(super) struct Recovery<'a> {
     pub what: String,
     /// The best weights kept in memory, if any (otherwise they are in `weights`).
     pub best: Option<&'a BTreeMap<String, Tensor>>,
+    /// The initial weights, when the best ones cannot train (they diverged again before an
+    /// epoch finished after the last rollback): training starts over from them.
+    pub initial: Option<&'a HashMap<String, Tensor>>,
     /// The best weights' file (written at every new best when the model is too large to keep
     /// in memory, and at every checkpoint).
     pub weights: &'a Path,
@@ -51,29 +54,66 @@ impl Recovery<'_> {
                 self.what, progress.epoch
             )));
         }
-        match self.best {
-            Some(tensors) => {
+        match (self.initial, self.best) {
+            (Some(initial), _) => model.set_tensors(initial, self.weights)?,
+            (None, Some(tensors)) => {
                 let tensors: HashMap<_, _> = tensors
                     .iter()
                     .map(|(k, v)| (k.clone(), v.clone()))
                     .collect();
                 model.set_tensors(&tensors, self.weights)?;
             }
-            None => model.load(self.weights)?,
+            (None, None) => model.load(self.weights)?,
         }
         adam.restart()?;
-        progress.schedule.rollback();
+        progress.schedule.rollback(adam.step_count());
         Ok(())
     }
 
     /// The warning once [`Self::apply`] succeeded.
     pub fn message(&self, progress: &Progress) -> String {
+        let from = if self.initial.is_some() {
+            format!(
+                "the weights of epoch {} diverged again, so training starts over from the \
+                 initial weights",
+                progress.best_epoch
+            )
+        } else {
+            format!(
+                "training goes on from the weights of epoch {}",
+                progress.best_epoch
+            )
+        };
         format!(
-            "warning: {}; training goes on from the weights of epoch {} at half the learning \
-             rate ({:.1e})",
+            "warning: {}; {from} at half the learning rate ({:.1e})",
             self.what,
-            progress.best_epoch,
             progress.schedule.lr(self.schedule, self.base_lr, u64::MAX)
         )
     }
+}
+
+/// The name of the first weight (or batch-norm statistic) holding a NaN or an infinity, if any.
+pub(super) fn non_finite_weight(model: &MeshVae) -> Result<Option<String>> {
+    for (name, var) in model.trainable_vars().into_iter().chain(model.state_vars()) {
+        let sum = var
+            .as_tensor()
+            .to_dtype(DType::F64)?
+            .sum_all()?
+            .to_scalar::<f64>()?;
+        if !sum.is_finite() {
+            return Ok(Some(name));
+        }
+    }
+    Ok(None)
+}
+
+/// Every weight and batch-norm statistic of `model` by name (what [`MeshVae::set_tensors`]
+/// takes).
+pub(super) fn tensors_of(model: &MeshVae) -> HashMap<String, Tensor> {
+    model
+        .trainable_vars()
+        .into_iter()
+        .chain(model.state_vars())
+        .map(|(name, var)| (name, var.as_tensor().clone()))
+        .collect()
 }
