@@ -306,4 +306,12 @@ fn rigid_distances_stand_beside_the_paper_and_copies_are_split_out() {
         "{md}"
     );
     assert!(!md.contains("shared/notes"));
+    // Ours alone is not "the lowest".
+    let alone: Vec<RunResult> = (1..=2).map(|seed| result(OURS, seed, 0.02)).collect();
+    let md = markdown(&outcome(alone), None);
+    assert!(
+        md.contains("no other ablation column has finished a run yet"),
+        "{md}"
+    );
+    assert!(!md.contains("ours has the lowest"), "{md}");
 }
