@@ -141,8 +141,8 @@ pub struct ScheduleState {
 }
 
 /// After a rollback the rate rises linearly from 1/`REWARM_STEPS` of its value over this many
-/// steps. Adam restarts with empty moments, and its first steps then move every weight by the
-/// full rate whatever its gradient: at 5e-3 that alone broke samba (seed 3) again at once.
+/// steps. Adam restarts with empty moments, and its first steps then move every weight by about
+/// the full rate whatever its gradient, a jolt to weights that have just been restored.
 pub const REWARM_STEPS: u64 = 100;
 
 impl Default for ScheduleState {
