@@ -7,8 +7,9 @@ use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
 use meshvae::{
-    DEFAULT_MAX_STEPS, ModelConfig, ModelFolder, Schedule, Selection, Split, SplitFile, StopReason,
-    TrainConfig, TrainOptions, TrainRequest, TrainedModel, VaeError, read_log, read_status, train,
+    DEFAULT_MAX_STEPS, EpochRecord, ModelConfig, ModelFolder, RunStatus, Schedule, Selection,
+    Split, SplitFile, StopReason, TrainConfig, TrainOptions, TrainRequest, TrainSummary,
+    TrainedModel, VaeError, read_log, read_status, train,
 };
 use std::path::{Path, PathBuf};
 
@@ -284,25 +285,40 @@ fn a_non_finite_loss_stops_training_with_a_message() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// A divergence after the first epochs is not the end of the run: training goes back to the
-/// best weights at half the rate, with fresh optimizer moments, and the run says so.
-#[test]
-fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
+/// Eight epochs on a small set at a constant rate whose step 9 diverges (and, with
+/// `fail_after_rollback`, also the first step after that rollback): the summary, the log
+/// (every epoch once, in order, all finite: a failed attempt is not logged), the status and
+/// the base rate.
+fn diverging_run(
+    name: &str,
+    fail_after_rollback: bool,
+) -> (TrainSummary, Vec<EpochRecord>, RunStatus, f64) {
     let set = small_set(3, 8);
-    let out = scratch("rollback");
+    let out = scratch(name);
     let mut req = request(&set, &out, 8);
     req.train.schedule = Schedule::constant();
-    let lr = req.train.lr;
     let options = TrainOptions {
         fail_step: Some(9),
+        fail_after_rollback,
         ..options(false, false)
     };
     let summary = train(&req, &options, |_| {}).unwrap();
     assert_eq!(summary.epochs_total, 8);
-    let log = read_log(&ModelFolder::new(&out).log()).unwrap();
-    // Every epoch logged once, in order; the failed attempt at the divergent one is not.
+    let folder = ModelFolder::new(&out);
+    let log = read_log(&folder.log()).unwrap();
     let epochs: Vec<usize> = log.iter().map(|r| r.epoch).collect();
     assert_eq!(epochs, (1..=8).collect::<Vec<_>>());
+    assert!(log.iter().all(|r| r.train_loss.is_finite()));
+    let status = read_status(&folder).unwrap().unwrap();
+    let _ = std::fs::remove_dir_all(&out);
+    (summary, log, status, req.train.lr)
+}
+
+/// A divergence after the first epochs is not the end of the run: training goes back to the
+/// best weights at half the rate, with fresh optimizer moments, and the run says so.
+#[test]
+fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
+    let (summary, log, status, lr) = diverging_run("rollback", false);
     let steps_per_epoch = log[0].step as usize;
     let failed_epoch = 8 / steps_per_epoch + 1;
     // After the rollback (8 steps taken) the halved rate warms up again over REWARM_STEPS.
@@ -322,7 +338,6 @@ fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
             "epoch {}: {got} vs {expected}",
             r.epoch
         );
-        assert!(r.train_loss.is_finite());
     }
     // The steps of the abandoned attempt count: the optimizer took them.
     let failed_steps = 9 - (failed_epoch - 1) * steps_per_epoch;
@@ -331,33 +346,16 @@ fn a_divergence_rolls_back_to_the_best_weights_at_half_the_rate() {
         8 * steps_per_epoch + failed_steps - 1,
         "{log:?}"
     );
-    let status = read_status(&ModelFolder::new(&out)).unwrap().unwrap();
     assert_eq!((status.rollbacks, status.lr_cuts), (1, 1));
     assert!((status.lr - rate(summary.steps)).abs() <= 1e-12 * lr);
-    let _ = std::fs::remove_dir_all(&out);
 }
 
-/// Best weights that diverge again at their very first step cannot be gone back to: the run
+/// Best weights that diverge again before an epoch finishes cannot be gone back to: the run
 /// starts over from its initial weights (at a quarter of the rate after two rollbacks) and
 /// finishes.
 #[test]
 fn best_weights_that_cannot_take_a_step_give_way_to_the_initial_ones() {
-    let set = small_set(3, 8);
-    let out = scratch("rollback-initial");
-    let mut req = request(&set, &out, 8);
-    req.train.schedule = Schedule::constant();
-    let options = TrainOptions {
-        fail_step: Some(9),
-        fail_after_rollback: true,
-        ..options(false, false)
-    };
-    let summary = train(&req, &options, |_| {}).unwrap();
-    assert_eq!(summary.epochs_total, 8);
-    let log = read_log(&ModelFolder::new(&out).log()).unwrap();
-    let epochs: Vec<usize> = log.iter().map(|r| r.epoch).collect();
-    assert_eq!(epochs, (1..=8).collect::<Vec<_>>());
-    assert!(log.iter().all(|r| r.train_loss.is_finite()));
-    let status = read_status(&ModelFolder::new(&out)).unwrap().unwrap();
+    let (_, log, status, _) = diverging_run("rollback-initial", true);
     assert_eq!((status.rollbacks, status.lr_cuts), (2, 2));
     // Started over: the first epoch after the restart fits worse than the epoch before the
     // divergence did (the initial weights know nothing yet).
@@ -367,7 +365,6 @@ fn best_weights_that_cannot_take_a_step_give_way_to_the_initial_ones() {
         log[failed_epoch - 1].train_loss > log[failed_epoch - 2].train_loss,
         "{log:?}"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The default protocol: no test mesh influences training or the choice of checkpoint. Two
