@@ -161,6 +161,63 @@ fn rigid_motions_and_affine_maps_round_trip_exactly() {
     }
 }
 
+/// Errors in mesh units follow the set's scale: a set scaled by s about the origin has the same
+/// features, and any feature array (a network's imperfect output included) reconstructs to s
+/// times the unscaled set's mesh. So a model trained on a rescaled copy of a data set is the same
+/// model, and its errors are s times those on the original files: published absolute errors
+/// compare with ours only after converting units.
+#[test]
+fn a_uniformly_scaled_set_has_the_same_features_and_scaled_reconstructions() {
+    let s = 1.676_881_5;
+    let (pos, faces) = bumpy_sphere();
+    // A non-affine pose: each point turned about z by an angle growing with its height.
+    let bent: Vec<Point> = pos
+        .iter()
+        .map(|p| {
+            let r = exp_rotation([0.0, 0.0, 0.6 * f64::from(p[2])]);
+            let q = mul_vec(&r, p.map(f64::from));
+            [q[0] as f32, q[1] as f32, (q[2] * 1.1) as f32]
+        })
+        .collect();
+    let scaled = |points: &[Point]| -> Vec<Point> {
+        points
+            .iter()
+            .map(|p| p.map(|x| (f64::from(x) * s) as f32))
+            .collect()
+    };
+    let options = FeatureOptions::default();
+    let features_of = |rest: &[Point], frame: &[Point]| {
+        let set = set_of(rest, &[frame.to_vec()], &faces);
+        let extractor = FeatureExtractor::for_set(&set, options).unwrap();
+        let features = extractor.extract(&set).unwrap().features;
+        (features, Reconstructor::new(extractor.rest()).unwrap())
+    };
+    let (f1, rec1) = features_of(&pos, &bent);
+    let (f2, rec2) = features_of(&scaled(&pos), &scaled(&bent));
+    let largest = f1.frame(1).iter().fold(0.0f32, |a, x| a.max(x.abs()));
+    let differ = f1
+        .frame(1)
+        .iter()
+        .zip(f2.frame(1))
+        .fold(0.0f32, |a, (x, y)| a.max((x - y).abs()));
+    assert!(largest > 0.1 && differ < 1e-4 * largest, "features differ by {differ}");
+    // A "network output": the features, off by a smooth error.
+    let output: Vec<f32> = f1
+        .frame(1)
+        .iter()
+        .enumerate()
+        .map(|(i, x)| x + 0.05 * ((i / 9) as f32 * 0.37).sin() * ((i % 9) as f32 - 4.0) / 4.0)
+        .collect();
+    let mesh1 = rec1.reconstruct(&output).unwrap();
+    let mesh2 = rec2.reconstruct(&output).unwrap();
+    let error1 = frame_error(&mesh1, &bent).0 * mesh_io::bbox_diagonal(&bent);
+    assert!(error1 > 1e-3, "the perturbed output is not a copy of the pose ({error1})");
+    let worst = mesh1.iter().zip(&mesh2).fold(0.0f64, |a, (p, q)| {
+        (0..3).fold(a, |a, k| a.max((q[k] - s * p[k]).abs()))
+    });
+    assert!(worst < 1e-5, "scaled reconstruction off by {worst}");
+}
+
 #[test]
 fn similarities_are_fitted_exactly_without_the_correction() {
     // The plain per-vertex fit returns the similarity's own linear part at every vertex.

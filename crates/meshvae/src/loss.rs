@@ -1,4 +1,4 @@
-//! The training loss, as the authors' code computes it (authors-code.md §5.1):
+//! The training loss, as the authors' released code computes it:
 //!
 //! L = w_rec · mean_b Σ_{v,c} (x − x̂)²
 //!   + w_kl  · mean_b ½ Σ_j (μ_j² + σ_j² − log(10⁻⁸ + σ_j²) − 1)
@@ -14,7 +14,8 @@
 //! 80 · [½·mean SSE + (3/80)·KL + (1/80)·L2]: an effective α of 3/80 = 0.0375 relative to the
 //! paper's ½·mean SSE (0.075 if the ½ is dropped), not 0.3. The paper's own formula is
 //! `LossWeights { rec: 0.5, kl: 0.3, l2: … }` (its L2 weight is unknown); the defaults follow the
-//! code, which produced the published numbers.
+//! code, which produced the published numbers; at their scale the paper's α is `--loss-weights
+//! 40,24,1` (80 × 0.3 = 24).
 //!
 //! ## Conditional models
 //! The `*_cond` variants take each mesh's one-hot label c (encoder and decoder both see it).

@@ -4,9 +4,12 @@
 use super::ReproError;
 use super::plan::{Budget, Run};
 use candle_core::Device;
+use deform_features::FeatureOptions;
+use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use meshvae::{
-    EpochRecord, ModelConfig, ModelFolder, StopReason, TrainOptions, TrainRequest, TrainedModel,
+    EpochRecord, ModelConfig, ModelFolder, StopReason, TrainConfig, TrainOptions, TrainRequest,
+    TrainedModel,
 };
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -83,6 +86,30 @@ pub struct RunResult {
     /// among the training meshes (`--split-by-mesh` on horse-gallop).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub copy_split: Option<CopySplitRecord>,
+    /// The training, feature and hierarchy settings the run trained with, so that a record is
+    /// not reused once a default changes (learning rate, schedule, normalisation, de-pooling).
+    /// Absent from results written before records kept them; those match on the rest.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<RunSettings>,
+}
+
+/// The settings of [`RunResult::settings`], as `config.json` of the model folder holds them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunSettings {
+    pub train: TrainConfig,
+    pub features: FeatureOptions,
+    pub hierarchy: HierarchyConfig,
+}
+
+impl RunSettings {
+    /// What `run` trains with today.
+    pub fn of(run: &Run, model: &ModelConfig) -> Self {
+        Self {
+            train: run.train_config(),
+            features: FeatureOptions::default(),
+            hierarchy: meshvae::hierarchy_config(model, HierarchyConfig::default()),
+        }
+    }
 }
 
 /// [`meshvae::CopySplit`] as a run records it.
@@ -104,9 +131,12 @@ impl RunResult {
     }
 
     /// Whether this result was produced by `run` (same data set, protocol, column, seed,
-    /// budget, kind of split and network).
+    /// budget, kind of split and network, and the same settings where the record has them).
     pub fn matches(&self, run: &Run, model: &ModelConfig) -> bool {
-        self.dataset == run.dataset.name
+        self.settings
+            .as_ref()
+            .is_none_or(|s| *s == RunSettings::of(run, model))
+            && self.dataset == run.dataset.name
             && self.protocol == run.protocol.id
             && self.column == run.column.id
             && self.seed == run.seed
@@ -264,6 +294,11 @@ pub fn execute(
             unseen_meshes: c.unseen.map_or(0, |u| u.meshes),
             unseen_mean_distance_rigid: c.unseen.map(|u| u.mean_distance_rigid),
         }),
+        settings: Some(RunSettings {
+            train: trained.spec.train.clone(),
+            features: trained.spec.features,
+            hierarchy: trained.spec.hierarchy,
+        }),
     };
     let path = run.result_path(records);
     if let Some(parent) = path.parent() {
@@ -383,6 +418,34 @@ mod tests {
         let back: RunResult = serde_json::from_str(&text).unwrap();
         assert_eq!(back, converged);
         assert!(matches(&back, &run(Budget::CONVERGED)));
+    }
+
+    #[test]
+    fn a_record_trained_with_other_settings_is_not_reused() {
+        let mut record: RunResult = serde_json::from_str(OLD_RECORD).unwrap();
+        let plan = run(Budget::CONVERGED);
+        record.step_budget = Some(DEFAULT_MAX_STEPS);
+        let model = plan.column.model().unwrap();
+        // Records written before they kept their settings match on the rest.
+        assert!(record.settings.is_none() && matches(&record, &plan));
+        record.settings = Some(RunSettings::of(&plan, &model));
+        assert!(matches(&record, &plan));
+        // A default that changed since the run (the rate, the normalisation, the de-pooling)
+        // makes the record stale: the run trains again.
+        let stale = |edit: &dyn Fn(&mut RunSettings)| {
+            let mut r = record.clone();
+            edit(r.settings.as_mut().unwrap());
+            !matches(&r, &plan)
+        };
+        assert!(stale(&|s| s.train.lr *= 0.5));
+        assert!(stale(&|s| s.train.normalize_quantile = 0.0));
+        assert!(stale(&|s| s.train.schedule.patience += 1));
+        assert!(stale(&|s| s.features.integrable = !s.features.integrable));
+        assert!(stale(&|s| s.hierarchy.ratio = 0.25));
+        // Written and read back, the settings survive.
+        let text = serde_json::to_string(&record).unwrap();
+        assert!(text.contains("\"settings\""), "{text}");
+        assert_eq!(serde_json::from_str::<RunResult>(&text).unwrap(), record);
     }
 
     #[test]

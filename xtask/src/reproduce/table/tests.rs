@@ -35,6 +35,7 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         steps: None,
         test_mean_distance_rigid: None,
         copy_split: None,
+        settings: None,
     }
 }
 
@@ -314,4 +315,23 @@ fn rigid_distances_stand_beside_the_paper_and_copies_are_split_out() {
         "{md}"
     );
     assert!(!md.contains("ours has the lowest"), "{md}");
+}
+
+#[test]
+fn the_papers_horse_figure_is_shown_in_our_copys_units() {
+    let mut o = outcome(vec![]);
+    // Horse-gallop's row, whatever set stands in for it.
+    o.sets[0].dataset = plan::dataset("horse-gallop").unwrap();
+    let mut r = result(OURS, 1, 0.02);
+    r.dataset = "horse-gallop".into();
+    r.test_mean_distance_rigid = Some(0.0177);
+    o.results = vec![r];
+    let md = markdown(&o, None);
+    let row = md
+        .lines()
+        .find(|l| l.starts_with("| Horse (paper) / horse-gallop |"))
+        .unwrap_or_else(|| panic!("{md}"));
+    // 0.0119 × 1.6768815 = 0.019955.
+    assert!(row.contains("| 0.0119 (= 0.01995 here) | 0.01770 |"), "{row}");
+    assert!(md.contains("scaled by 1.6768815 about the origin"), "{md}");
 }
