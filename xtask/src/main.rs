@@ -2,9 +2,9 @@
 //!
 //! - `cargo xtask datasets [--pack DIR]`: checks that every standard data set is unpacked and
 //!   has the expected counts; with `--pack`, writes each as a `.mvset` cache into DIR.
-//! - `cargo xtask reproduce [--dataset …] [--epochs N | --converged] [--seeds N] [--quick]`:
-//!   trains the paper's ablations on our data sets and writes `docs/results.md` (see
-//!   `xtask::reproduce`).
+//! - `cargo xtask reproduce [--dataset …] [--epochs N] [--split-by-mesh] [--seeds N] [--quick]`:
+//!   trains the paper's ablations on our data sets, each run until converged (or for N epochs),
+//!   and writes `docs/results.md` or the page of its plan (see `xtask::reproduce`).
 
 use clap::{Parser, Subcommand};
 use mesh_io::{QualityReport, datasets};
@@ -48,14 +48,14 @@ struct ReproduceArgs {
     /// page still shows every finished run [default: all].
     #[arg(long, value_delimiter = ',')]
     columns: Vec<String>,
-    /// Epochs per run, at the authors' constant learning rate of 1e-3 [default: 600; with
-    /// --quick: 2].
+    /// Train every run for N epochs at the authors' constant learning rate of 1e-3 (the plan of
+    /// the 600-epoch records, `e600/`) instead of until converged.
     #[arg(long)]
     epochs: Option<usize>,
-    /// Train every run as `meshvae train` does by default instead of for a fixed number of
-    /// epochs: until the validation loss converges (learning rate 1e-2 halved on plateaus, stop
-    /// after 1,500 steps without a new best), at most 20,000 steps [with --quick: 4 steps]. Its
-    /// runs and records live under `converged/` instead of `e<epochs>/`.
+    /// Train every run as `meshvae train` does by default, until the validation loss converges
+    /// (learning rate 1e-2 halved on plateaus, stop after 1,500 steps without a new best), at
+    /// most 20,000 steps [with --quick: 4 steps]; runs and records live under `converged/`.
+    /// This is the default; the flag only says so.
     #[arg(long, conflicts_with = "epochs")]
     converged: bool,
     /// Seeds 1..=N, one split each [default: 3; with --quick: 1].
@@ -68,7 +68,10 @@ struct ReproduceArgs {
     /// target/reproduce/quick, in the workspace].
     #[arg(long)]
     work: Option<PathBuf>,
-    /// The markdown to write [default: docs/results.md in the workspace].
+    /// The markdown to write [default, in the workspace: docs/results.md for converged runs
+    /// split by shape, docs/results-split-by-mesh.md split mesh by mesh,
+    /// docs/results-<N>-epochs.md for `--epochs N` (a `-split-by-mesh` or `-select-on-test`
+    /// suffix for those plans); with --quick, results.md in the work folder].
     #[arg(long)]
     results: Option<PathBuf>,
     /// Folder of the finished runs' small result JSONs, in the work folder's layout [default:
@@ -135,8 +138,25 @@ fn not_one_of<'a>(
     }
 }
 
-/// The step budget of `--quick --converged`: enough to check the pipeline, far from converged.
+/// The step budget of `--quick`: enough to check the pipeline, far from converged.
 const QUICK_MAX_STEPS: usize = 4;
+
+/// The page of a plan, relative to the workspace: one page per plan, so that regenerating one
+/// never overwrites another's hand-written notes. `docs/results.md` is the main plan's:
+/// converged runs, split by shape, checkpoints chosen on validation meshes.
+fn default_results(budget: Budget, by_shape: bool, protocol: &plan::Protocol) -> String {
+    let mut name = match budget {
+        Budget::Converged { .. } => "docs/results".to_string(),
+        Budget::Epochs(epochs) => format!("docs/results-{epochs}-epochs"),
+    };
+    if !by_shape {
+        name.push_str("-split-by-mesh");
+    }
+    if protocol.select_on_test {
+        name.push_str("-select-on-test");
+    }
+    name + ".md"
+}
 
 fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
     let mut notes = Vec::new();
@@ -189,30 +209,34 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
     } else {
         workspace().join("target/reproduce")
     };
+    let budget = match args.epochs {
+        Some(epochs) => Budget::Epochs(epochs),
+        None => Budget::Converged {
+            max_steps: if args.quick {
+                QUICK_MAX_STEPS
+            } else {
+                meshvae::DEFAULT_MAX_STEPS
+            },
+        },
+    };
+    let by_shape = !args.split_by_mesh;
+    let results = match args.results {
+        Some(path) => path,
+        None if args.quick => default_work.join("results.md"),
+        None => workspace().join(default_results(budget, by_shape, protocol)),
+    };
     let options = Options {
         datasets: chosen,
         columns,
-        budget: if args.converged {
-            Budget::Converged {
-                max_steps: if args.quick {
-                    QUICK_MAX_STEPS
-                } else {
-                    meshvae::DEFAULT_MAX_STEPS
-                },
-            }
-        } else {
-            Budget::Epochs(args.epochs.unwrap_or(if args.quick { 2 } else { 600 }))
-        },
+        budget,
         seeds: args.seeds.unwrap_or(if args.quick { 1 } else { 3 }),
         quick: args.quick,
         protocol,
-        by_shape: !args.split_by_mesh,
+        by_shape,
         work: args.work.unwrap_or(default_work),
         records: args.records,
         jobs: args.jobs,
-        results: args
-            .results
-            .unwrap_or_else(|| workspace().join("docs/results.md")),
+        results,
         command: std::iter::once("cargo xtask".to_string())
             .chain(std::env::args().skip(1))
             .collect::<Vec<_>>()
@@ -282,5 +306,30 @@ fn check_datasets(pack: Option<PathBuf>) -> ExitCode {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_plan_has_its_own_page() {
+        let [validation, on_test] = [&plan::PROTOCOLS[0], &plan::PROTOCOLS[1]];
+        assert!(on_test.select_on_test && !validation.select_on_test);
+        let page = |budget, by_shape, protocol| default_results(budget, by_shape, protocol);
+        assert_eq!(page(Budget::CONVERGED, true, validation), "docs/results.md");
+        assert_eq!(
+            page(Budget::CONVERGED, false, validation),
+            "docs/results-split-by-mesh.md"
+        );
+        assert_eq!(
+            page(Budget::Epochs(600), true, validation),
+            "docs/results-600-epochs.md"
+        );
+        assert_eq!(
+            page(Budget::Epochs(600), false, on_test),
+            "docs/results-600-epochs-split-by-mesh-select-on-test.md"
+        );
     }
 }

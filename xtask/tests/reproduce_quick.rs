@@ -1,15 +1,19 @@
 //! `cargo xtask reproduce --quick` end to end, into a temporary folder (never docs/): every run
 //! trains and is evaluated, the markdown has every table, column and data set with finite
 //! numbers, and a second invocation reuses the finished runs and resumes an unfinished one;
-//! the converged plan (`--converged`) keeps its runs apart and resumes by their `run.json`.
+//! the converged plan (the default without `--epochs`) keeps its runs apart and resumes by
+//! their `run.json`.
 
 use std::path::Path;
 use std::process::{Command, Output};
 use xtask::reproduce::plan::{COLUMNS, PROTOCOLS};
 use xtask::reproduce::run::RunResult;
 
+/// The fixed-epoch plan most of the test checks: two epochs a run.
+const TWO_EPOCHS: [&str; 2] = ["--epochs", "2"];
+
 fn reproduce(work: &Path, results: &Path) -> Output {
-    reproduce_with(work, results, &[])
+    reproduce_with(work, results, &TWO_EPOCHS)
 }
 
 fn reproduce_with(work: &Path, results: &Path, extra: &[&str]) -> Output {
@@ -83,7 +87,7 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     let _cleanup = RemoveOnDrop(dir.clone());
     let (work, results) = (dir.join("work"), dir.join("results.md"));
     // Before any run: --report-only trains nothing and writes a page that says so.
-    reproduce_with(&work, &results, &["--report-only"]);
+    reproduce_with(&work, &results, &["--report-only", "--epochs", "2"]);
     let md = std::fs::read_to_string(&results).unwrap();
     assert!(
         md.contains("**Partial:**") && md.contains("| not run |"),
@@ -192,7 +196,14 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     let records = dir.join("records");
     let records_arg = records.to_str().unwrap();
     let parallel_work = dir.join("parallel");
-    let synthetic = ["--dataset", "synthetic", "--records", records_arg];
+    let synthetic = [
+        "--dataset",
+        "synthetic",
+        "--records",
+        records_arg,
+        "--epochs",
+        "2",
+    ];
     reproduce_with(
         &parallel_work,
         &dir.join("parallel.md"),
@@ -232,9 +243,10 @@ fn quick_reproduce_writes_every_table_and_resumes() {
     let md = std::fs::read_to_string(dir.join("elsewhere.md")).unwrap();
     assert!(!md.contains("| not run |"), "{md}");
 
-    // The converged plan (`--quick`: a 4-step budget, far from converging) in the same work
-    // folder: its own runs under converged-s4/, none of the 2-epoch runs reused.
-    let converged = ["--dataset", "synthetic", "--converged"];
+    // The converged plan, the default without --epochs (`--quick`: a 4-step budget, far from
+    // converging), in the same work folder: its own runs under converged-s4/, none of the
+    // 2-epoch runs reused.
+    let converged = ["--dataset", "synthetic"];
     let out = reproduce_with(&work, &dir.join("converged.md"), &converged);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(

@@ -200,7 +200,10 @@ fn a_uniformly_scaled_set_has_the_same_features_and_scaled_reconstructions() {
         .iter()
         .zip(f2.frame(1))
         .fold(0.0f32, |a, (x, y)| a.max((x - y).abs()));
-    assert!(largest > 0.1 && differ < 1e-4 * largest, "features differ by {differ}");
+    assert!(
+        largest > 0.1 && differ < 1e-4 * largest,
+        "features differ by {differ}"
+    );
     // A "network output": the features, off by a smooth error.
     let output: Vec<f32> = f1
         .frame(1)
@@ -211,7 +214,10 @@ fn a_uniformly_scaled_set_has_the_same_features_and_scaled_reconstructions() {
     let mesh1 = rec1.reconstruct(&output).unwrap();
     let mesh2 = rec2.reconstruct(&output).unwrap();
     let error1 = frame_error(&mesh1, &bent).0 * mesh_io::bbox_diagonal(&bent);
-    assert!(error1 > 1e-3, "the perturbed output is not a copy of the pose ({error1})");
+    assert!(
+        error1 > 1e-3,
+        "the perturbed output is not a copy of the pose ({error1})"
+    );
     let worst = mesh1.iter().zip(&mesh2).fold(0.0f64, |a, (p, q)| {
         (0..3).fold(a, |a, k| a.max((q[k] - s * p[k]).abs()))
     });

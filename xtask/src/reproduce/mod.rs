@@ -1,5 +1,6 @@
 //! `cargo xtask reproduce`: trains the paper's ablations on our data sets, several seeds each,
-//! and writes `docs/results.md` with our numbers beside the paper's.
+//! and writes `docs/results.md` (or the page of another plan) with our numbers beside the
+//! paper's.
 //!
 //! - [`plan`]: the run table (data sets, columns, protocols) and each run's folder;
 //! - [`run`]: one run — train with resumption, evaluate, record a result JSON;
@@ -9,8 +10,9 @@
 //! - [`paper`]: the paper's numbers.
 //!
 //! Every run is a model folder under the work folder,
-//! `<data set>/<protocol>/<budget>/seed<N>/<column>` with the budget `e<epochs>` (a fixed number
-//! of epochs) or `converged` (`--converged`: until the validation loss converges); a finished
+//! `<data set>/<protocol>/<budget>/seed<N>/<column>` with the budget `converged` (the default:
+//! until the validation loss converges, `-by-mesh` for the paper's split) or `e<epochs>`
+//! (`--epochs N`: a fixed number of epochs at the authors' constant rate); a finished
 //! run leaves `<column>.result.json` beside it and is skipped next time, an unfinished one is
 //! resumed from its checkpoint, so an interrupted `reproduce` continues where it stopped.
 

@@ -504,7 +504,10 @@ fn frameworks(md: &mut String, o: &Outcome) {
             ours.as_ref().map_or("not run".into(), |a| a.rms.show()),
         );
     }
-    if o.sets.iter().any(|s| paper::copy_scale(s.dataset.name).is_some()) {
+    if o.sets
+        .iter()
+        .any(|s| paper::copy_scale(s.dataset.name).is_some())
+    {
         let _ = writeln!(
             md,
             "\n\"= … here\": the paper's figure in our copy's units. Our horse-gallop is \

@@ -332,6 +332,9 @@ fn the_papers_horse_figure_is_shown_in_our_copys_units() {
         .find(|l| l.starts_with("| Horse (paper) / horse-gallop |"))
         .unwrap_or_else(|| panic!("{md}"));
     // 0.0119 × 1.6768815 = 0.019955.
-    assert!(row.contains("| 0.0119 (= 0.01995 here) | 0.01770 |"), "{row}");
+    assert!(
+        row.contains("| 0.0119 (= 0.01995 here) | 0.01770 |"),
+        "{row}"
+    );
     assert!(md.contains("scaled by 1.6768815 about the origin"), "{md}");
 }
