@@ -22,7 +22,8 @@ pub struct EvalArgs {
     /// the training meshes), params,
     /// params_without_biases, epochs, best_epoch, selected_on, stop_reason, steps,
     /// still_improving, train_seconds, vertices, test_meshes, val_meshes, train_meshes,
-    /// split_by_shape, loss_plot).
+    /// split_by_shape, loss_plot, warnings: [{kind, message}] when the test error is not clearly
+    /// below the mean training shape's or training was cut while still improving).
     #[arg(long)]
     json: bool,
     /// Report the weights with the lowest TEST loss, as the authors' code chose its checkpoint
@@ -48,6 +49,8 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         None if epochs.0 >= trained.spec.train.epochs => "budget",
         None => "interrupted",
     };
+    let warnings = meshvae::quality_warnings(&report, status.as_ref());
+    let warnings_json = crate::generate::print_quality(&warnings);
     let copy_in_training = report.copies.map(|c| c.copy_in_training);
     let unseen = report.copies.and_then(|c| c.unseen);
     let value = serde_json::json!({
@@ -81,6 +84,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "val_meshes": trained.split.val.len(),
         "train_meshes": report.train.meshes,
         "split_by_shape": trained.spec.train.split_by_shape,
+        "warnings": warnings_json,
     });
     if args.json {
         let text = serde_json::to_string_pretty(&value)

@@ -67,6 +67,30 @@ pub fn model_and_set_selected(
     Ok((trained, loaded.value))
 }
 
+/// Prints why the model in `model` is not to be trusted, if it is not (test error not clearly
+/// below the mean training shape's, training cut while still improving), and returns the
+/// warnings as JSON for the command's report.
+pub fn check_quality(
+    trained: &TrainedModel,
+    set: &MeshSet,
+    model: &Path,
+) -> Result<serde_json::Value, CliError> {
+    let status = meshvae::read_status(&meshvae::ModelFolder::new(model))?;
+    let warnings = trained.quality_warnings(set, status.as_ref(), &Device::Cpu)?;
+    Ok(print_quality(&warnings))
+}
+
+/// Prints each warning on stderr and returns them as `[{"kind", "message"}]`.
+pub fn print_quality(warnings: &[meshvae::QualityWarning]) -> serde_json::Value {
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+    warnings
+        .iter()
+        .map(|w| serde_json::json!({"kind": w.kind(), "message": w.to_string()}))
+        .collect()
+}
+
 /// Creates the output folder (and its parents).
 pub fn create_out(dir: &Path) -> Result<(), CliError> {
     std::fs::create_dir_all(dir).map_err(|e| CliError::Output {
@@ -151,6 +175,7 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
         count: args.count,
         seed: args.seed,
     };
+    let warnings = check_quality(&trained, &set, &args.model)?;
     let generated = trained.generate_labelled(&set, &options, args.label.as_deref())?;
     let meshes: Vec<TriMesh> = generated
         .positions
@@ -227,6 +252,7 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
         "label_share": share,
         "distance": "mean per-vertex Euclidean distance to the nearest training mesh, centroids aligned",
         "samples": rows,
+        "warnings": warnings,
     });
     write_json(&args.out.join("report.json"), &report)?;
     if let Some(image) = &sheet {

@@ -2,7 +2,9 @@
 //! that plays the sequence (morph-target animation) and a PNG strip.
 
 use crate::CliError;
-use crate::generate::{create_out, model_and_set, tiles, to_mesh, write_json, write_png};
+use crate::generate::{
+    check_quality, create_out, model_and_set, tiles, to_mesh, write_json, write_png,
+};
 use mesh_io::{MeshSet, TriMesh};
 use mesh_render::View;
 use std::path::PathBuf;
@@ -40,6 +42,7 @@ pub fn run(args: &InterpolateArgs) -> Result<(), CliError> {
         ));
     }
     let (trained, set) = model_and_set(&args.model, args.set.as_ref())?;
+    let warnings = check_quality(&trained, &set, &args.model)?;
     let seq = meshvae::interpolate(&trained, &set, &args.from, &args.to, args.steps).map_err(
         |e| match e {
             // The library names its arguments `from` / `to`; the user typed the flags.
@@ -96,6 +99,7 @@ pub fn run(args: &InterpolateArgs) -> Result<(), CliError> {
             "t": seq.t,
             "files": names.iter().map(|n| format!("{n}.obj")).collect::<Vec<_>>(),
             "latents": seq.latents,
+            "warnings": warnings,
         }),
     )?;
     out!(

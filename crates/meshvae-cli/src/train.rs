@@ -386,6 +386,7 @@ pub struct ReconstructArgs {
 
 pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
     let (trained, set) = model_and_set(&args.model, args.set.as_ref())?;
+    crate::generate::check_quality(&trained, &set, &args.model)?;
     let ids: Vec<usize> = if args.all {
         (0..set.len()).collect()
     } else {
