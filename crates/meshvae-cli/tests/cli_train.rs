@@ -48,6 +48,15 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     };
     let out = ok(&resume(&["--epochs", "3"]));
     assert!(out.contains("trained 1 epoch(s)"), "{out}");
+    // A budget below what the run has trained is refused, and config.json stays as it was.
+    let config = std::fs::read(model.join("config.json")).unwrap();
+    fails_with(
+        &resume(&["--epochs", "2"]),
+        1,
+        "cannot resume with --epochs 2: the model has already trained 3 epochs",
+    );
+    fails_with(&resume(&["--steps", "1"]), 1, "already trained");
+    assert_eq!(std::fs::read(model.join("config.json")).unwrap(), config);
     fails_with(&resume(&["--steps", "0"]), 1, "steps");
     fails_with(&resume(&["--epochs", "4", "--steps", "9"]), 2, "--steps");
     fails_with(&resume(&["--lr", "0.5"]), 1, "cannot resume");
@@ -78,6 +87,37 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     let by_mesh = dir.join("by-mesh");
     one_epoch(&by_mesh, &["--split-by-mesh"]);
     assert_eq!(split(&by_mesh)["by_shape"], false);
+    // A run killed in its first epoch (run.json says interrupted, no checkpoint, nothing
+    // logged): --resume says that it starts again instead of passing a restart off as a
+    // continuation.
+    std::fs::remove_file(by_mesh.join("checkpoint.safetensors")).unwrap();
+    std::fs::write(by_mesh.join("log.jsonl"), "").unwrap();
+    let status = std::fs::read_to_string(by_mesh.join("run.json")).unwrap();
+    let killed = status.replace("\"budget\"", "\"interrupted\"");
+    assert_ne!(killed, status);
+    std::fs::write(by_mesh.join("run.json"), killed).unwrap();
+    let out = meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&by_mesh),
+        "--resume",
+        "--epochs",
+        "1",
+        "--split-by-mesh",
+        "--batch",
+        "4",
+        "--latent",
+        "16",
+        "--quiet",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(ok(&out).contains("trained 1 epoch(s)"));
+    assert!(
+        stderr.contains("no checkpoint to continue from")
+            && stderr.contains("restarts from epoch 1"),
+        "{stderr}"
+    );
     // The authors' choices where they differ from ours, for A/B runs, recorded in config.json.
     let authors = dir.join("authors");
     one_epoch(

@@ -244,6 +244,14 @@ pub fn train(
     };
     if options.resume && folder.checkpoint().is_file() {
         progress = Checkpoint::load(&folder.checkpoint(), &mut model, &mut adam)?;
+    } else if options.resume {
+        // Interrupted before its first checkpoint: said, so that a restart is not mistaken for
+        // a continuation.
+        eprintln!(
+            "{}: no checkpoint to continue from (the run stopped before its first one); training \
+             restarts from epoch 1",
+            folder.dir.display()
+        );
     }
     truncate_log(&folder.log(), progress.epoch)?;
     let mut rng = Rng::from_state(progress.rng)?;

@@ -5,7 +5,7 @@ use super::EpochRecord;
 use crate::config::ModelConfig;
 use crate::data::{MeshData, NormalizationFit};
 use crate::error::{Result, VaeError};
-use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, VERSION};
+use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, TrainConfig, VERSION};
 use crate::schedule::StopReason;
 use crate::split::Split;
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
@@ -200,6 +200,7 @@ pub(super) fn resume_setup(
             ),
         ));
     }
+    refuse_smaller_budget(folder, &request.train)?;
     if (spec.train.epochs, spec.train.steps) != (request.train.epochs, request.train.steps) {
         spec.train.epochs = request.train.epochs;
         spec.train.steps = request.train.steps;
@@ -243,13 +244,7 @@ fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Re
             ),
         ));
     }
-    let text = std::fs::read_to_string(&log).map_err(|e| VaeError::io(&log, e))?;
-    let logged = text
-        .lines()
-        .filter_map(|line| serde_json::from_str::<EpochRecord>(line).ok())
-        .map(|r| r.epoch)
-        .max()
-        .unwrap_or(0);
+    let logged = logged_epochs(folder)?;
     if logged > 0 && logged >= epochs {
         return Err(VaeError::model(
             &folder.dir,
@@ -263,6 +258,50 @@ fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Re
         ));
     }
     Ok(())
+}
+
+/// A budget below what the run has already trained would be met before the first step: the
+/// run would stop at once while `config.json` claimed the smaller budget. Refused, with nothing
+/// written. The run's own record (`run.json`, else the log) says how far it got.
+fn refuse_smaller_budget(folder: &ModelFolder, train: &TrainConfig) -> Result<()> {
+    let (epochs, steps) = match super::read_status(folder)? {
+        Some(status) => (status.epochs, Some(status.steps)),
+        None => (logged_epochs(folder)?, None),
+    };
+    let smaller = match (train.steps, steps) {
+        (Some(budget), Some(done)) => (budget as u64) < done,
+        // Without a step count (models from before run.json), compare epochs.
+        (Some(_), None) => false,
+        (None, _) => train.epochs < epochs,
+    };
+    if !smaller {
+        return Ok(());
+    }
+    let (flag, budget, done) = match (train.steps, steps) {
+        (Some(budget), Some(done)) => ("--steps", budget as u64, format!("{done} steps")),
+        _ => ("--epochs", train.epochs as u64, format!("{epochs} epochs")),
+    };
+    Err(VaeError::model(
+        &folder.dir,
+        format!(
+            "cannot resume with {flag} {budget}: the model has already trained {done}; give a              larger budget to train longer (nothing was changed)"
+        ),
+    ))
+}
+
+/// The last epoch in the folder's log (0 without one).
+fn logged_epochs(folder: &ModelFolder) -> Result<usize> {
+    let log = folder.log();
+    if !log.is_file() {
+        return Ok(0);
+    }
+    let text = std::fs::read_to_string(&log).map_err(|e| VaeError::io(&log, e))?;
+    Ok(text
+        .lines()
+        .filter_map(|line| serde_json::from_str::<EpochRecord>(line).ok())
+        .map(|r| r.epoch)
+        .max()
+        .unwrap_or(0))
 }
 
 /// Creates `out`, refusing to overwrite a model (or any non-empty folder) unless `force`.
