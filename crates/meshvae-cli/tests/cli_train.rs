@@ -257,3 +257,101 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     fails_with(&meshvae(&["eval", s(&dir)]), 1, "not a model folder");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Kills training ten times at pseudo-random moments while it writes a checkpoint after every
+/// epoch; the next run cleans what the kills left, and every file of the folder stays readable.
+#[test]
+fn killed_runs_leave_no_temporary_files_and_readable_folders() {
+    use std::process::{Command, Stdio};
+    let dir = scratch("kill");
+    let set = dir.join("set");
+    let model = dir.join("model");
+    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "3"]));
+    let args = |resume: bool, epochs: &str| -> Vec<String> {
+        let mut a = vec![
+            "train",
+            s(&set),
+            "--out",
+            s(&model),
+            "--epochs",
+            epochs,
+            "--batch",
+            "4",
+            "--latent",
+            "16",
+            "--checkpoint-seconds",
+            "0",
+            "--quiet",
+        ];
+        if resume {
+            a.push("--resume");
+        }
+        a.into_iter().map(String::from).collect()
+    };
+    let run = |a: Vec<String>| meshvae(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    // xorshift: the same "random" moments on every run of the test.
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut killed_with_temporary = 0;
+    for round in 0..10 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let wait = std::time::Duration::from_millis(300 + state % 1200);
+        // The first run starts the folder; the others continue it (or restart it, if it was
+        // killed before its first checkpoint).
+        let resume = model.join("config.json").is_file();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_meshvae"))
+            .args(args(resume, "100000"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(wait);
+        let _ = child.kill();
+        child.wait().unwrap();
+        let temporaries = temporaries(&model);
+        killed_with_temporary += usize::from(!temporaries.is_empty());
+        let logged = std::fs::read_to_string(model.join("log.jsonl"))
+            .map(|t| t.lines().count())
+            .unwrap_or(0);
+        eprintln!(
+            "round {round}: killed after {wait:?}, {logged} epochs logged, temporaries {temporaries:?}"
+        );
+    }
+    // One more left by hand, so that the cleaning is tested whatever the kills hit.
+    std::fs::write(
+        model.join(".checkpoint.safetensors.tmp"),
+        b"half a checkpoint",
+    )
+    .unwrap();
+    eprintln!("{killed_with_temporary} of 10 kills left a temporary file");
+    let done: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model.join("run.json")).unwrap()).unwrap();
+    let epochs = (done["epochs"].as_u64().unwrap() + 2).to_string();
+    ok(&run(args(true, &epochs)));
+    assert_eq!(temporaries(&model), Vec::<String>::new());
+    // Every file reads: the evaluation loads the settings, split, hierarchy, normalisation and
+    // weights; the log and run.json parse; the checkpoint continues.
+    ok(&meshvae(&["eval", s(&model), "--json"]));
+    for line in std::fs::read_to_string(model.join("log.jsonl"))
+        .unwrap()
+        .lines()
+    {
+        serde_json::from_str::<serde_json::Value>(line).unwrap();
+    }
+    let more = (done["epochs"].as_u64().unwrap() + 3).to_string();
+    ok(&run(args(true, &more)));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn temporaries(dir: &std::path::Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.starts_with('.') && n.ends_with(".tmp"))
+                .collect()
+        })
+        .unwrap_or_default()
+}

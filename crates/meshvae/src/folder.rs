@@ -309,6 +309,30 @@ impl ModelFolder {
         self.config().is_file()
     }
 
+    /// Removes the temporary files that a killed write left behind (`.<name>.tmp` and
+    /// `.<name>.<pid>.tmp`: every file of a model folder is written beside its final name and
+    /// renamed, so a kill mid-write leaves the old file whole and this one behind), and returns
+    /// how many. Training calls it before it writes anything; no two processes write one model
+    /// folder at once.
+    pub fn remove_stale_temporaries(&self) -> Result<usize> {
+        let entries = match std::fs::read_dir(&self.dir) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+            Err(e) => return Err(VaeError::io(&self.dir, e)),
+        };
+        let mut removed = 0;
+        for entry in entries {
+            let path = entry.map_err(|e| VaeError::io(&self.dir, e))?.path();
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+            let temporary = name.is_some_and(|n| n.starts_with('.') && n.ends_with(".tmp"));
+            if temporary && path.is_file() {
+                std::fs::remove_file(&path).map_err(|e| VaeError::io(&path, e))?;
+                removed += 1;
+            }
+        }
+        Ok(removed)
+    }
+
     pub fn write_json<T: Serialize>(&self, path: &Path, value: &T) -> Result<()> {
         mesh_io::atomic::write_atomic(path, |w| {
             serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;

@@ -218,6 +218,10 @@ pub fn train(
 
     // Checked before anything is written, so bad settings leave no half-made model folder.
     request.model.validate()?;
+    // Left by a run killed while writing a file (its complete predecessor is still there).
+    if options.resume || options.force {
+        folder.remove_stale_temporaries()?;
+    }
     let (spec, hierarchy, data, files) = if options.resume {
         let (spec, hierarchy, data) = resume_setup(request, &folder, hierarchy_config)?;
         (spec, hierarchy, data, None)
