@@ -58,3 +58,10 @@ def test_mesh_set_from_arrays(sphere):
     assert "2 frames" in repr(s)
     with pytest.raises(meshvae.InputError, match="labels"):
         meshvae.MeshSet(frames, faces, labels=["one"])
+
+
+def test_load_warnings_are_python_warnings(tmp_path):
+    (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    with pytest.warns(UserWarning, match="1 quads split into triangles"):
+        vertices, faces = meshvae.load_mesh(tmp_path / "quad.obj")
+    assert vertices.shape == (4, 3) and faces.shape == (2, 3)
