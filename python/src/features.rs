@@ -50,7 +50,10 @@ fn features_out<'py>(
 /// ACAP-consistent ones (``--principal``). ``normal_weight``: weight of the vertex-normal pair
 /// in the fit. Warnings about the rest mesh are issued as ``UserWarning``.
 #[pyfunction]
-#[pyo3(signature = (mesh_set, rest=Frame::Index(0), *, integrable=true, principal=false, normal_weight=1.0))]
+#[pyo3(
+    signature = (mesh_set, rest=Frame::Index(0), *, integrable=true, principal=false, normal_weight=1.0),
+    text_signature = "(mesh_set, rest=0, *, integrable=True, principal=False, normal_weight=1.0)"
+)]
 pub fn acap_features<'py>(
     py: Python<'py>,
     mesh_set: &MeshSet,

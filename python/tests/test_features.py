@@ -91,3 +91,25 @@ def test_normalization(sphere_set):
         meshvae.Normalization(1.0, -1.0, 0.0, 2.0)
     with pytest.raises(meshvae.InputError, match=r"features: expected an array of shape \[\.\.\., 9\]"):
         n.apply(np.zeros((4, 8), np.float32))
+
+
+def test_long_calls_release_the_gil(horse):
+    import threading
+    import time
+
+    ticks, done = [0], threading.Event()
+
+    def count():
+        while not done.is_set():
+            ticks[0] += 1
+            time.sleep(0.001)
+
+    thread = threading.Thread(target=count)
+    thread.start()
+    try:
+        meshvae.acap_features(horse)
+    finally:
+        done.set()
+        thread.join()
+    # With the GIL held for the whole call the counter could not run at all.
+    assert ticks[0] > 10, ticks[0]
