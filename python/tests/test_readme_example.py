@@ -13,8 +13,11 @@ def test_pytorch_example(horse_path, monkeypatch, capsys):
     pytest.importorskip(
         "torch", reason="SKIPPED: torch is not importable, so the README's PyTorch example is not run"
     )
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), re.S)
+    text = README.read_text()
+    blocks = list(re.finditer(r"```python\n(.*?)```", text, re.S))
     assert len(blocks) == 1, "python/README.md should hold one python example"
+    # Padded with the lines before it, so that tracebacks give the README's line numbers.
+    code = "\n" * text[: blocks[0].start(1)].count("\n") + blocks[0].group(1)
     monkeypatch.chdir(horse_path.parent)
-    exec(compile(blocks[0], str(README), "exec"), {})
+    exec(compile(code, str(README), "exec"), {})
     assert capsys.readouterr().out.strip() == "(8, 4216, 9) (8, 8431, 9)"
