@@ -1,0 +1,50 @@
+"""meshvae: the meshvae crates from Python.
+
+Mesh sets with their vertex order kept (:func:`load_set`, :func:`load_mesh`, :func:`save_obj`,
+:func:`save_glb`), the paper's simplifier with its fine-to-coarse vertex map
+(:func:`simplify`), the levels, Laplacians and pooling / de-pooling operators a mesh network
+needs (:class:`Hierarchy`, as ``scipy.sparse.csr_matrix``), and ACAP deformation features with
+their exact inverse (:func:`acap_features`, :class:`Normalization`, :func:`reconstruct`).
+
+Arrays are numpy: positions float32 [V, 3] or [N, V, 3], faces int32 [F, 3], features float32
+[N, V, 9]. Errors are :class:`MeshvaeError`: :class:`InputError` (also a ``ValueError``) or
+:class:`FileError` (also an ``OSError``), carrying the message of the Rust crates.
+"""
+
+from ._errors import FileError, InputError, MeshvaeError
+from ._meshvae import (
+    FeatureFile,
+    Hierarchy,
+    MeshSet,
+    Normalization,
+    Simplified,
+    __version__,
+    acap_features,
+    load_features,
+    load_mesh,
+    load_set,
+    reconstruct,
+    save_glb,
+    save_obj,
+    simplify,
+)
+
+__all__ = [
+    "FeatureFile",
+    "FileError",
+    "Hierarchy",
+    "InputError",
+    "MeshSet",
+    "MeshvaeError",
+    "Normalization",
+    "Simplified",
+    "__version__",
+    "acap_features",
+    "load_features",
+    "load_mesh",
+    "load_set",
+    "reconstruct",
+    "save_glb",
+    "save_obj",
+    "simplify",
+]

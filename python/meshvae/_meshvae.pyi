@@ -1,0 +1,179 @@
+"""Type stubs of the compiled extension (python/src); see the docstrings there."""
+
+from os import PathLike
+from typing import Any, Literal, Sequence
+
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse
+
+__version__: str
+
+_Path = str | PathLike[str]
+_Floats = npt.ArrayLike  # any float array (float32 or float64), or nested lists
+_Ints = npt.ArrayLike  # any integer array, or nested lists
+_F32 = npt.NDArray[np.float32]
+_I32 = npt.NDArray[np.int32]
+_I64 = npt.NDArray[np.int64]
+
+class MeshSet:
+    """N meshes ("frames") of one connectivity."""
+
+    def __init__(
+        self,
+        positions: _Floats,
+        faces: _Ints,
+        names: Sequence[str] | None = None,
+        labels: Sequence[str] | None = None,
+    ) -> None: ...
+    @property
+    def positions(self) -> _F32:
+        """float32 [N, V, 3], read-only."""
+    @property
+    def faces(self) -> _I32:
+        """int32 [F, 3], read-only."""
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def labels(self) -> list[str] | None: ...
+    @property
+    def vertex_count(self) -> int: ...
+    def __len__(self) -> int: ...
+
+def load_set(path: _Path) -> MeshSet:
+    """Reads a folder of mesh files, a multi-frame GLB or a .mvset cache."""
+
+def load_mesh(path: _Path) -> tuple[_F32, _I32]:
+    """Reads one mesh file: (vertices float32 [V, 3], faces int32 [F, 3])."""
+
+def save_obj(path: _Path, vertices: _Floats, faces: _Ints) -> None:
+    """Writes one mesh as OBJ."""
+
+def save_glb(
+    path: _Path, frames: _Floats, faces: _Ints, names: Sequence[str] | None = None
+) -> None:
+    """Writes frames [N, V, 3] as one GLB with morph targets."""
+
+class Simplified:
+    """A simplified mesh and the map fine vertex -> coarse vertex."""
+
+    @property
+    def vertices(self) -> _F32:
+        """float32 [M, 3]."""
+    @property
+    def faces(self) -> _I32:
+        """int32 [F', 3]."""
+    @property
+    def cluster(self) -> _I64:
+        """int64 [V]: the coarse vertex of every fine vertex."""
+    @property
+    def survivors(self) -> _I64 | None:
+        """int64 [M]: the fine vertex kept as each coarse vertex (None for remesh)."""
+    @property
+    def report(self) -> dict[str, Any]:
+        """The report `meshvae simplify --json` prints."""
+
+def simplify(
+    vertices: _Floats,
+    faces: _Ints,
+    ratio: float = 0.5,
+    lam: float | None = None,
+    method: Literal["modified-qem", "qem", "remesh"] = "modified-qem",
+) -> Simplified:
+    """Simplifies to `ratio` of the vertices; `lam` defaults to 0.001 for modified-qem."""
+
+_Pooler = Literal["mean", "ours", "qem", "max", "sampling", "none", "graph", "remesh"]
+
+class Hierarchy:
+    """Levels 0..=L, their Laplacians, and the pooling operators between them."""
+
+    @staticmethod
+    def build(
+        vertices: _Floats,
+        faces: _Ints,
+        levels: int = 1,
+        pool: _Pooler = "mean",
+        ratio: float = 0.5,
+        depool: Literal["copy", "transpose"] = "copy",
+    ) -> Hierarchy: ...
+    @staticmethod
+    def load(path: _Path) -> Hierarchy: ...
+    def save(self, path: _Path) -> None: ...
+    @property
+    def levels(self) -> int:
+        """Number of pooling steps L."""
+    @property
+    def pool_kind(self) -> str: ...
+    @property
+    def vertex_counts(self) -> list[int]: ...
+    def laplacian(self, level: int) -> scipy.sparse.csr_matrix:
+        """Rescaled Laplacian of `level`, V x V float32."""
+    def pooling(self, step: int) -> scipy.sparse.csr_matrix:
+        """Pooling matrix P of `step`, m x n float32: coarse = P @ fine."""
+    def depooling(self, step: int) -> scipy.sparse.csr_matrix:
+        """De-pooling matrix D of `step`, n x m float32: fine = D @ coarse."""
+    def cluster(self, step: int) -> _I64 | None: ...
+    def positions(self, level: int) -> _F32: ...
+    def faces(self, level: int) -> _I32: ...
+    def pool(self, step: int, x: _Floats) -> _F32:
+        """[n, C] or [B, n, C] -> [m, C] or [B, m, C], as the network pools."""
+    def depool(self, step: int, x: _Floats) -> _F32:
+        """[m, C] or [B, m, C] -> [n, C] or [B, n, C]."""
+
+def acap_features(
+    mesh_set: MeshSet,
+    rest: int | str = 0,
+    *,
+    integrable: bool = True,
+    principal: bool = False,
+    normal_weight: float = 1.0,
+) -> _F32:
+    """Raw ACAP features, float32 [N, V, 9]."""
+
+def reconstruct(
+    features: _Floats, template_vertices: _Floats, template_faces: _Ints
+) -> _F32:
+    """Positions float32 [N, V, 3] (or [V, 3]) from raw features [N, V, 9] (or [V, 9])."""
+
+class Normalization:
+    """The map of features into [-0.95, 0.95] and back."""
+
+    def __init__(
+        self,
+        rotation_min: float,
+        rotation_max: float,
+        scale_min: float,
+        scale_max: float,
+        clamp: float | None = None,
+    ) -> None: ...
+    @staticmethod
+    def fit(features: _Floats, quantile: float = 0.0) -> Normalization: ...
+    def apply(self, features: _Floats) -> _F32: ...
+    def invert(self, normalized: _Floats) -> _F32: ...
+    def to_json(self) -> str: ...
+    @staticmethod
+    def from_json(text: str) -> Normalization: ...
+    @property
+    def rotation_min(self) -> float: ...
+    @property
+    def rotation_max(self) -> float: ...
+    @property
+    def scale_min(self) -> float: ...
+    @property
+    def scale_max(self) -> float: ...
+    @property
+    def clamp(self) -> float | None: ...
+
+class FeatureFile:
+    """What `meshvae features` wrote."""
+
+    @property
+    def features(self) -> _F32: ...
+    @property
+    def normalized(self) -> bool: ...
+    @property
+    def normalization(self) -> Normalization | None: ...
+    @property
+    def names(self) -> list[str]: ...
+
+def load_features(path: _Path) -> FeatureFile: ...
