@@ -4,7 +4,8 @@ Mesh sets with their vertex order kept (:func:`load_set`, :func:`load_mesh`, :fu
 :func:`save_glb`), the paper's simplifier with its fine-to-coarse vertex map
 (:func:`simplify`), the levels, Laplacians and pooling / de-pooling operators a mesh network
 needs (:class:`Hierarchy`, as ``scipy.sparse.csr_matrix``), and ACAP deformation features with
-their exact inverse (:func:`acap_features`, :class:`Normalization`, :func:`reconstruct`).
+their exact inverse (:func:`acap_features`, :class:`Normalization`, :func:`reconstruct`),
+and models trained by ``meshvae train`` (:class:`Model`: ``encode``, ``decode``).
 
 Arrays are numpy: positions float32 [V, 3] or [N, V, 3], faces int32 [F, 3], features float32
 [N, V, 9]. Errors are :class:`MeshvaeError`: :class:`InputError` (also a ``ValueError``) or
@@ -16,6 +17,7 @@ from ._meshvae import (
     FeatureFile,
     Hierarchy,
     MeshSet,
+    Model,
     Normalization,
     Simplified,
     __version__,
@@ -36,6 +38,7 @@ __all__ = [
     "InputError",
     "MeshSet",
     "MeshvaeError",
+    "Model",
     "Normalization",
     "Simplified",
     "__version__",

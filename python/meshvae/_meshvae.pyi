@@ -1,6 +1,7 @@
 """Type stubs of the compiled extension (python/src); see the docstrings there."""
 
 from os import PathLike
+from pathlib import Path
 from typing import Any, Literal, Sequence
 
 import numpy as np
@@ -177,3 +178,31 @@ class FeatureFile:
     def names(self) -> list[str]: ...
 
 def load_features(path: _Path) -> FeatureFile: ...
+
+class Model:
+    """A model trained by `meshvae train`, in inference mode."""
+
+    @staticmethod
+    def load(path: _Path) -> Model: ...
+    def encode(
+        self, positions: _Floats, labels: Sequence[str] | None = None
+    ) -> tuple[_F32, _F32]:
+        """[N, V, 3] (or [V, 3]) -> (mu, sigma), float32 [N, latent] (or [latent]) each."""
+    def decode(self, z: _Floats, labels: Sequence[str] | None = None) -> _F32:
+        """[N, latent] (or [latent]) -> positions float32 [N, V, 3] (or [V, 3])."""
+    @property
+    def config(self) -> dict[str, Any]:
+        """The model folder's config.json."""
+    @property
+    def latent(self) -> int: ...
+    @property
+    def vertex_count(self) -> int: ...
+    @property
+    def faces(self) -> _I32: ...
+    @property
+    def template(self) -> _F32: ...
+    @property
+    def labels(self) -> list[str]:
+        """A conditional model's class labels; empty for an unconditional one."""
+    @property
+    def path(self) -> Path: ...

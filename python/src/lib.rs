@@ -4,10 +4,11 @@
 //! integer type `[F, 3]`, features `[..., 9]`) and paths. **Out:** numpy arrays (float32
 //! positions and features, int32 faces, int64 vertex maps), `scipy.sparse.csr_matrix` float32
 //! operators, and the classes `MeshSet`, `Simplified`, `Hierarchy`, `Normalization`,
-//! `FeatureFile`.
+//! `FeatureFile`, `Model`.
 //!
-//! A thin layer: every computation is a call into mesh-io, qem-simplify, mesh-hierarchy or
-//! deform-features, the same calls the `meshvae` command makes, so results equal the command's.
+//! A thin layer: every computation is a call into mesh-io, qem-simplify, mesh-hierarchy,
+//! deform-features or meshvae (trained models), the same calls the `meshvae` command makes, so
+//! results equal the command's.
 //! Inputs are checked here with errors naming the argument ([`arrays`]); every error of the
 //! crates becomes `meshvae.InputError` (a `ValueError`) or `meshvae.FileError` (an `OSError`)
 //! carrying its message ([`errors`]); long calls release the GIL (`Python::detach`).
@@ -20,6 +21,7 @@ mod errors;
 mod features;
 mod hierarchy;
 mod mesh;
+mod model;
 mod simplify;
 
 use pyo3::prelude::*;
@@ -40,5 +42,6 @@ fn _meshvae(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(features::acap_features, m)?)?;
     m.add_function(wrap_pyfunction!(features::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(features::load_features, m)?)?;
+    m.add_class::<model::Model>()?;
     Ok(())
 }

@@ -1,0 +1,120 @@
+"""Model.load / encode / decode of models the command line trains on its synthetic set: the
+decoded means equal what `meshvae reconstruct` writes."""
+
+import numpy as np
+import pytest
+
+import meshvae
+from conftest import run_cli
+
+LATENT = 16
+
+
+def train(cli, root, *flags):
+    """The synthetic set (6 meshes, 2 labels) and a tiny model trained on it."""
+    root.mkdir(parents=True, exist_ok=True)
+    mesh_set, model = root / "set", root / "model"
+    if not mesh_set.is_dir():
+        run_cli(cli, "synth", "--out", mesh_set, "--per-label", 3)
+    run_cli(
+        cli, "train", mesh_set, "--out", model, "--epochs", 2, "--batch", 4,
+        "--latent", LATENT, "--quiet", *flags,
+    )
+    return mesh_set, model
+
+
+@pytest.fixture(scope="module")
+def trained(cli, tmp_path_factory):
+    return train(cli, tmp_path_factory.mktemp("model"))
+
+
+@pytest.fixture(scope="module")
+def model(trained):
+    return meshvae.Model.load(trained[1])
+
+
+def cli_reconstructions(cli, model_dir, names, out):
+    run_cli(cli, "reconstruct", model_dir, "--all", "--out", out)
+    return np.stack([meshvae.load_mesh(out / f"{name}.obj")[0] for name in names])
+
+
+def assert_same_meshes(got, want):
+    diagonal = np.linalg.norm(want.reshape(-1, 3).max(0) - want.reshape(-1, 3).min(0))
+    error = np.abs(got - want).max() / diagonal
+    assert error < 1e-5, f"max difference {error:.2e} of the bounding box diagonal"
+
+
+def test_load_and_properties(model, trained):
+    mesh_set = meshvae.load_set(trained[0])
+    assert model.latent == LATENT
+    assert model.vertex_count == mesh_set.vertex_count
+    np.testing.assert_array_equal(model.faces, mesh_set.faces)
+    assert model.template.shape == (mesh_set.vertex_count, 3)
+    assert model.template.dtype == np.float32
+    config = model.config
+    assert config["model"]["latent"] == LATENT
+    assert config["vertices"] == mesh_set.vertex_count
+    assert config["names"] == mesh_set.names
+    assert model.labels == []
+    assert "latent=16" in repr(model)
+
+
+def test_encode_decode_equals_cli_reconstruct(cli, model, trained, tmp_path):
+    mesh_set = meshvae.load_set(trained[0])
+    mu, sigma = model.encode(mesh_set.positions)
+    n = len(mesh_set.names)
+    assert mu.shape == sigma.shape == (n, LATENT)
+    assert mu.dtype == sigma.dtype == np.float32
+    assert np.isfinite(mu).all() and np.isfinite(sigma).all() and (sigma > 0).all()
+
+    decoded = model.decode(mu)
+    assert decoded.shape == (n, mesh_set.vertex_count, 3) and decoded.dtype == np.float32
+    want = cli_reconstructions(cli, trained[1], mesh_set.names, tmp_path / "r")
+    assert_same_meshes(decoded, want)
+
+    # One mesh and one vector: [V, 3] -> [latent] -> [V, 3]; float64 input is accepted.
+    mu2, sigma2 = model.encode(mesh_set.positions[2].astype(np.float64))
+    assert mu2.shape == sigma2.shape == (LATENT,)
+    np.testing.assert_allclose(mu2, mu[2], rtol=1e-5, atol=1e-6)
+    one = model.decode(mu2)
+    assert one.shape == (mesh_set.vertex_count, 3)
+    assert_same_meshes(one, want[2])
+
+
+def test_conditional_model(cli, tmp_path):
+    mesh_set_dir, model_dir = train(cli, tmp_path, "--conditional")
+    mesh_set = meshvae.load_set(mesh_set_dir)
+    model = meshvae.Model.load(model_dir)
+    assert sorted(model.labels) == sorted(set(mesh_set.labels))
+    mu, sigma = model.encode(mesh_set.positions, labels=mesh_set.labels)
+    assert mu.shape == (len(mesh_set.names), LATENT) and (sigma > 0).all()
+    decoded = model.decode(mu, labels=mesh_set.labels)
+    want = cli_reconstructions(cli, model_dir, mesh_set.names, tmp_path / "r")
+    assert_same_meshes(decoded, want)
+    with pytest.raises(meshvae.InputError, match="labels: the model is conditional"):
+        model.encode(mesh_set.positions)
+    with pytest.raises(meshvae.InputError, match="labels: 1 labels for 6 rows"):
+        model.decode(mu, labels=mesh_set.labels[:1])
+    with pytest.raises(meshvae.InputError, match="nonsense"):
+        model.decode(mu[:1], labels=["nonsense"])
+
+
+def test_bad_input(model, trained):
+    v = model.vertex_count
+    with pytest.raises(meshvae.InputError, match=rf"positions: expected shape \[N, {v}, 3\] or \[{v}, 3\]"):
+        model.encode(np.zeros((2, v - 1, 3), np.float32))
+    with pytest.raises(meshvae.InputError, match="positions: expected a float32 or float64 array"):
+        model.encode(np.zeros((v, 3), np.int32))
+    with pytest.raises(meshvae.InputError, match=rf"z: expected shape \[N, {LATENT}\] or \[{LATENT}\]"):
+        model.decode(np.zeros((3, LATENT + 1), np.float32))
+    with pytest.raises(meshvae.InputError, match="z: row 1 is not finite"):
+        model.decode(np.array([[0.0] * LATENT, [np.nan] * LATENT]))
+    with pytest.raises(meshvae.InputError, match="labels: the model is not conditional"):
+        model.decode(np.zeros(LATENT), labels=["a"])
+
+
+def test_missing_or_foreign_folder(tmp_path, trained):
+    with pytest.raises(meshvae.FileError, match="no such model folder"):
+        meshvae.Model.load(tmp_path / "absent")
+    with pytest.raises(meshvae.InputError, match="not a model folder"):
+        meshvae.Model.load(trained[0])  # the mesh set, not a model
