@@ -118,3 +118,21 @@ def test_missing_or_foreign_folder(tmp_path, trained):
         meshvae.Model.load(tmp_path / "absent")
     with pytest.raises(meshvae.InputError, match="not a model folder"):
         meshvae.Model.load(trained[0])  # the mesh set, not a model
+
+
+def test_encode_decode_equals_cli_reconstruct_on_horse_gallop(cli, horse_path, tmp_path):
+    """The same on real data: a one-epoch horse-gallop model (far from trained; the
+    comparison is of the two code paths, not of the model), its test meshes."""
+    model_dir = tmp_path / "horse-model"
+    run_cli(cli, "train", horse_path, "--out", model_dir, "--epochs", 1, "--quiet")
+    model = meshvae.Model.load(model_dir)
+    horse = meshvae.load_set(horse_path)
+    out = tmp_path / "r"
+    run_cli(cli, "reconstruct", model_dir, "--out", out)
+    names = sorted(p.stem for p in out.glob("*.obj"))
+    assert len(names) == 24, names
+    index = {name.rsplit(".", 1)[0]: i for i, name in enumerate(horse.names)}
+    ids = [index[name] for name in names]
+    want = np.stack([meshvae.load_mesh(out / f"{name}.obj")[0] for name in names])
+    mu, _ = model.encode(horse.positions[ids])
+    assert_same_meshes(model.decode(mu), want)
