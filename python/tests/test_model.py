@@ -136,3 +136,34 @@ def test_encode_decode_equals_cli_reconstruct_on_horse_gallop(cli, horse_path, t
     want = np.stack([meshvae.load_mesh(out / f"{name}.obj")[0] for name in names])
     mu, _ = model.encode(horse.positions[ids])
     assert_same_meshes(model.decode(mu), want)
+
+
+def test_every_safetensors_file_reads_with_the_safetensors_package(trained, tmp_path):
+    """Any safetensors reader opens what a model folder holds, the metadata follows one
+    convention, names the tied decoder weight and explains the checkpoint's counters."""
+    import zlib
+
+    from safetensors import safe_open
+
+    files = sorted(trained[1].glob("*.safetensors"))
+    names = {f.name for f in files}
+    assert {"weights.safetensors", "checkpoint.safetensors"} <= names, names
+    for path in files:
+        with safe_open(path, "np") as f:
+            meta = f.metadata()
+            assert meta["format"] in ("meshvae-weights", "meshvae-checkpoint"), path
+            assert int(meta["version"]) >= 2 and meta["writer"].startswith("meshvae ")
+            data = path.read_bytes()
+            header = int.from_bytes(data[:8], "little")
+            assert meta["checksum"] == f"crc32:{zlib.crc32(data[8 + header:]):08x}", path
+            for key in f.keys():
+                assert f.get_tensor(key).size > 0, (path, key)
+            if meta["format"] == "meshvae-weights":
+                assert "dec.fc.weight" in meta["tied"] and "enc.mu.weight" in meta["tied"]
+                assert "dec.fc.weight" not in f.keys() and "enc.mu.weight" in f.keys()
+                assert "layout" in meta and "config" in meta
+            else:
+                keys = list(f.keys())
+                assert not any(k.startswith("adam.adam.") for k in keys), keys
+                assert "progress.epochs_done" in keys and "progress.epochs_done" in meta["progress"]
+                assert int(f.get_tensor("progress.epochs_done")[0]) == 2

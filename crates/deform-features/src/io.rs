@@ -3,20 +3,29 @@
 //!
 //! Tensors: `features` F32 [N, V, 9] (normalised when metadata `normalized` = `true`);
 //! optional `rest_positions` F32 [V, 3] and `faces` U32 [F, 3] (enough to reconstruct).
-//! Metadata (all strings): `format` = `meshvae-features/1`, `channels` (comma-separated channel
-//! names, see [`crate::CHANNEL_NAMES`]), `normalized`, `normalization` (JSON of
-//! [`Normalization`]), `names` (JSON array of frame names), plus any extra entries given.
+//! Metadata (all strings): the `mesh_io::stamped` convention (`format` = `meshvae-features`,
+//! `version` = `2`, `writer`, `checksum` of the tensor bytes, verified on reading),
+//! `channels` (comma-separated channel names, see [`crate::CHANNEL_NAMES`]), `normalized`,
+//! `normalization` (JSON of [`Normalization`]), `names` (JSON array of frame names), plus any
+//! extra entries given. Files of version 1 (`format` = `meshvae-features/1`) still load.
 
 use crate::error::FeatureError;
 use crate::features::{CHANNEL_NAMES, CHANNELS, FeatureSet};
 use crate::normalize::Normalization;
+use mesh_io::MeshIoError;
+use mesh_io::stamped::{Dtype, Entry, Stamp, f32_bytes, read_stamped, u32_bytes, write_stamped};
 use mesh_io::{Face, Point};
-use safetensors::tensor::{Dtype, SafeTensors, TensorView};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-/// The value of the `format` metadata entry.
-pub const FORMAT: &str = "meshvae-features/1";
+/// What a features file's metadata says it is.
+pub const STAMP: Stamp = Stamp {
+    format: "meshvae-features",
+    version: 2,
+};
+
+/// Metadata entries of the convention, not returned among [`FeatureFile::extra`].
+const CONVENTION: [&str; 4] = ["format", "version", "writer", "checksum"];
 
 /// Everything a features file holds.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,10 +41,6 @@ pub struct FeatureFile {
     pub faces: Option<Vec<Face>>,
     /// Other metadata entries (e.g. the feature options as JSON).
     pub extra: HashMap<String, String>,
-}
-
-fn le_bytes<T: Copy, const K: usize>(values: &[T], f: impl Fn(T) -> [u8; K]) -> Vec<u8> {
-    values.iter().flat_map(|&v| f(v)).collect()
 }
 
 /// Writes `file` to `path` (temporary file + rename).
@@ -54,8 +59,12 @@ pub fn save_features(path: &Path, file: &FeatureFile) -> Result<(), FeatureError
             "normalised features need their normalisation",
         ));
     }
-    let mut metadata = file.extra.clone();
-    metadata.insert("format".into(), FORMAT.into());
+    let mut metadata: BTreeMap<String, String> = file
+        .extra
+        .iter()
+        .filter(|(k, _)| !CONVENTION.contains(&k.as_str()))
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
     metadata.insert("channels".into(), CHANNEL_NAMES.join(","));
     metadata.insert("normalized".into(), file.normalized.to_string());
     if let Some(n) = &file.normalization {
@@ -65,12 +74,11 @@ pub fn save_features(path: &Path, file: &FeatureFile) -> Result<(), FeatureError
         .map_err(|e| FeatureError::input("frame names", e.to_string()))?;
     metadata.insert("names".into(), names);
 
-    let feature_bytes = le_bytes(fs.as_slice(), f32::to_le_bytes);
-    let mut buffers: Vec<(&str, Dtype, Vec<usize>, Vec<u8>)> = vec![(
+    let mut entries = vec![Entry::new(
         "features",
         Dtype::F32,
         vec![fs.frames(), fs.vertices(), CHANNELS],
-        feature_bytes,
+        f32_bytes(fs.as_slice()),
     )];
     if let Some(p) = &file.rest_positions {
         if p.len() != fs.vertices() {
@@ -81,32 +89,31 @@ pub fn save_features(path: &Path, file: &FeatureFile) -> Result<(), FeatureError
             ));
         }
         let flat: Vec<f32> = p.iter().flatten().copied().collect();
-        buffers.push((
+        entries.push(Entry::new(
             "rest_positions",
             Dtype::F32,
             vec![p.len(), 3],
-            le_bytes(&flat, f32::to_le_bytes),
+            f32_bytes(&flat),
         ));
     }
     if let Some(f) = &file.faces {
         let flat: Vec<u32> = f.iter().flatten().copied().collect();
-        buffers.push((
+        entries.push(Entry::new(
             "faces",
             Dtype::U32,
             vec![f.len(), 3],
-            le_bytes(&flat, u32::to_le_bytes),
+            u32_bytes(&flat),
         ));
     }
-    let mut views = Vec::with_capacity(buffers.len());
-    for (name, dtype, shape, bytes) in &buffers {
-        let view = TensorView::new(*dtype, shape.clone(), bytes)
-            .map_err(|e| FeatureError::input("features file", e.to_string()))?;
-        views.push((name.to_string(), view));
+    write_stamped(path, STAMP, metadata, entries).map_err(format_error)
+}
+
+/// A damaged, foreign or newer file is a [`FeatureError::Format`] naming it.
+fn format_error(e: MeshIoError) -> FeatureError {
+    match e {
+        MeshIoError::Tensors { path, message } => FeatureError::Format { path, message },
+        other => FeatureError::MeshIo(other),
     }
-    let bytes = safetensors::serialize(views, Some(metadata))
-        .map_err(|e| FeatureError::input("features file", e.to_string()))?;
-    mesh_io::atomic::write_bytes_atomic(path, &bytes)?;
-    Ok(())
 }
 
 /// Reads a file written by [`save_features`].
@@ -119,15 +126,13 @@ pub fn load_features(path: &Path) -> Result<FeatureFile, FeatureError> {
         path: path.into(),
         message,
     };
-    let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| bad(e.to_string()))?;
-    let tensors = SafeTensors::deserialize(&bytes).map_err(|e| bad(e.to_string()))?;
-    let mut extra = meta.metadata().clone().unwrap_or_default();
-    let format = extra.remove("format");
-    if format.as_deref() != Some(FORMAT) {
-        return Err(bad(format!(
-            "metadata format is {format:?}, expected {FORMAT:?}"
-        )));
-    }
+    let file = read_stamped(&bytes, path, STAMP).map_err(format_error)?;
+    let tensors = &file.tensors;
+    let mut extra: HashMap<String, String> = file
+        .metadata
+        .into_iter()
+        .filter(|(k, _)| !CONVENTION.contains(&k.as_str()))
+        .collect();
     extra.remove("channels");
     let normalized = match extra.remove("normalized").as_deref() {
         Some("true") => true,
@@ -261,6 +266,24 @@ mod tests {
     }
 
     #[test]
+    fn a_damaged_file_is_refused_naming_it() {
+        let path = temp("damaged.safetensors");
+        save_features(&path, &sample()).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let last = bytes.len() - 30;
+        bytes[last] ^= 1;
+        std::fs::write(&path, bytes).unwrap();
+        let err = load_features(&path).unwrap_err();
+        assert!(matches!(err, FeatureError::Format { .. }));
+        let text = err.to_string();
+        assert!(
+            text.contains("damaged.safetensors") && text.contains("checksum"),
+            "{text}"
+        );
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    #[test]
     fn bad_files_are_format_errors() {
         let path = temp("bad.safetensors");
         std::fs::write(&path, b"not a safetensors file").unwrap();
@@ -272,7 +295,7 @@ mod tests {
         let bytes = safetensors::serialize(
             [(
                 "x",
-                TensorView::new(Dtype::F32, vec![1], &[0, 0, 0, 0]).unwrap(),
+                safetensors::tensor::TensorView::new(Dtype::F32, vec![1], &[0, 0, 0, 0]).unwrap(),
             )],
             None,
         )

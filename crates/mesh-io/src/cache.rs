@@ -1,60 +1,47 @@
 //! The `.mvset` cache: a whole [`MeshSet`] in one safetensors file.
 //!
-//! Tensors: `positions` F32 [N, V, 3] and `faces` U32 [F, 3]. Metadata: `format` =
-//! `meshvae-set`, `version` = `1`, `names` (JSON array) and, for labelled sets, `labels` (JSON
-//! array). Written atomically; loading checks shapes, indices and finiteness like any reader.
+//! Tensors: `positions` F32 [N, V, 3] and `faces` U32 [F, 3]. Metadata: the [`crate::stamped`]
+//! convention (`format` = `meshvae-set`, `version` = `2`, `writer`, `checksum` of the tensor
+//! bytes), `names` (JSON array) and, for labelled sets, `labels` (JSON array). Written
+//! atomically; loading verifies the checksum (a damaged cache is refused, naming the file) and
+//! checks shapes, indices and finiteness like any reader. Version-1 caches (no checksum) still
+//! load.
 
-use crate::atomic::write_bytes_atomic;
 use crate::error::{MeshIoError, Result};
 use crate::mesh::{Face, MeshSet, Point};
-use safetensors::SafeTensors;
-use safetensors::tensor::{Dtype, TensorView};
-use std::collections::HashMap;
+use crate::stamped::{Dtype, Entry, Stamp, f32_bytes, read_stamped, u32_bytes, write_stamped};
+use std::collections::BTreeMap;
 use std::path::Path;
 
-const FORMAT: &str = "meshvae-set";
-const VERSION: &str = "1";
+/// What a cache's metadata says it is.
+pub const STAMP: Stamp = Stamp {
+    format: "meshvae-set",
+    version: 2,
+};
 
 /// Writes `set` to `path` (conventionally `*.mvset`), atomically.
 pub fn write_cache(path: &Path, set: &MeshSet) -> Result<()> {
-    let bad = |message: String| MeshIoError::Cache {
-        path: path.into(),
-        message,
-    };
-    let positions: Vec<u8> = set
-        .positions()
-        .iter()
-        .flatten()
-        .flat_map(|x| x.to_le_bytes())
-        .collect();
-    let faces: Vec<u8> = set
-        .faces()
-        .iter()
-        .flatten()
-        .flat_map(|x| x.to_le_bytes())
-        .collect();
-    let pos_view = TensorView::new(
-        Dtype::F32,
-        vec![set.len(), set.vertex_count(), 3],
-        &positions,
-    )
-    .map_err(|e| bad(e.to_string()))?;
-    let face_view = TensorView::new(Dtype::U32, vec![set.faces().len(), 3], &faces)
-        .map_err(|e| bad(e.to_string()))?;
-    let mut metadata = HashMap::from([
-        ("format".to_string(), FORMAT.to_string()),
-        ("version".to_string(), VERSION.to_string()),
-        ("names".to_string(), json(set.names())),
-    ]);
+    let mut metadata = BTreeMap::from([("names".to_string(), json(set.names()))]);
     if let Some(labels) = set.labels() {
         metadata.insert("labels".into(), json(labels));
     }
-    let bytes = safetensors::serialize(
-        [("positions", pos_view), ("faces", face_view)],
-        Some(metadata),
-    )
-    .map_err(|e| bad(e.to_string()))?;
-    write_bytes_atomic(path, &bytes)
+    let positions = Entry::lazy(
+        "positions",
+        Dtype::F32,
+        vec![set.len(), set.vertex_count(), 3],
+        || {
+            let flat: Vec<f32> = set.positions().iter().flatten().copied().collect();
+            Ok(f32_bytes(&flat).into())
+        },
+    );
+    let flat_faces: Vec<u32> = set.faces().iter().flatten().copied().collect();
+    let faces = Entry::new(
+        "faces",
+        Dtype::U32,
+        vec![set.faces().len(), 3],
+        u32_bytes(&flat_faces),
+    );
+    write_stamped(path, STAMP, metadata, vec![positions, faces])
 }
 
 fn json(strings: &[String]) -> String {
@@ -73,20 +60,8 @@ pub fn parse_cache(bytes: &[u8], path: &Path) -> Result<MeshSet> {
         path: path.into(),
         message,
     };
-    let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
-    let meta = header
-        .metadata()
-        .as_ref()
-        .ok_or_else(|| bad("no metadata".into()))?;
-    if meta.get("format").map(String::as_str) != Some(FORMAT) {
-        return Err(bad(format!("metadata `format` is not {FORMAT:?}")));
-    }
-    if meta.get("version").map(String::as_str) != Some(VERSION) {
-        return Err(bad(format!(
-            "unsupported version {:?}",
-            meta.get("version")
-        )));
-    }
+    let file = read_stamped(bytes, path, STAMP)?;
+    let meta = &file.metadata;
     let strings = |key: &str| -> Result<Option<Vec<String>>> {
         meta.get(key)
             .map(|s| serde_json::from_str(s).map_err(|e| bad(format!("metadata `{key}`: {e}"))))
@@ -95,7 +70,7 @@ pub fn parse_cache(bytes: &[u8], path: &Path) -> Result<MeshSet> {
     let names = strings("names")?.ok_or_else(|| bad("metadata has no `names`".into()))?;
     let labels = strings("labels")?;
 
-    let tensors = SafeTensors::deserialize(bytes).map_err(|e| bad(e.to_string()))?;
+    let tensors = &file.tensors;
     let pos = tensors
         .tensor("positions")
         .map_err(|e| bad(e.to_string()))?;
@@ -193,5 +168,49 @@ mod tests {
             );
         }
         assert!(parse_cache(b"not a cache at all", &path).is_err());
+    }
+
+    #[test]
+    fn a_cache_with_one_flipped_position_byte_is_refused_naming_the_file() {
+        let set = small_set();
+        let path =
+            std::env::temp_dir().join(format!("mesh-io-cache-f-{}.mvset", std::process::id()));
+        write_cache(&path, &set).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        // A high bit of one coordinate: still a finite number, so only the checksum tells.
+        let (n, _) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+        bytes[8 + n + 5] ^= 0x04;
+        let err = parse_cache(&bytes, &path).unwrap_err().to_string();
+        assert!(
+            err.contains("mesh-io-cache-f-") && err.contains("checksum"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn version_1_caches_without_a_checksum_still_load() {
+        let set = small_set();
+        let flat: Vec<f32> = set.positions().iter().flatten().copied().collect();
+        let pos = f32_bytes(&flat);
+        let faces = u32_bytes(&set.faces().iter().flatten().copied().collect::<Vec<_>>());
+        let views = [
+            (
+                "positions",
+                safetensors::tensor::TensorView::new(Dtype::F32, vec![3, 4, 3], &pos).unwrap(),
+            ),
+            (
+                "faces",
+                safetensors::tensor::TensorView::new(Dtype::U32, vec![2, 3], &faces).unwrap(),
+            ),
+        ];
+        let meta = std::collections::HashMap::from([
+            ("format".to_string(), "meshvae-set".to_string()),
+            ("version".to_string(), "1".to_string()),
+            ("names".to_string(), json(set.names())),
+        ]);
+        let bytes = safetensors::serialize(views, Some(meta)).unwrap();
+        let back = parse_cache(&bytes, Path::new("old.mvset")).unwrap();
+        assert_eq!(back.positions(), set.positions());
     }
 }

@@ -62,6 +62,9 @@ pub enum MeshIoError {
     Gltf { path: PathBuf, message: String },
     #[error("{}: not a valid mesh-set cache: {message}", path.display())]
     Cache { path: PathBuf, message: String },
+    /// A safetensors file of the tool that is damaged, foreign or newer than this build.
+    #[error("{}: {message}", path.display())]
+    Tensors { path: PathBuf, message: String },
     #[error("{}:{line}: {message}", path.display())]
     Labels {
         path: PathBuf,

@@ -41,6 +41,7 @@ pub mod off;
 pub mod ply;
 mod quality;
 pub mod set;
+pub mod stamped;
 pub mod synth;
 mod twins;
 

@@ -21,10 +21,29 @@ pub struct QualityReport {
     pub unused_vertices: usize,
     /// Bounding-box diagonal of frame 0.
     pub bbox_diagonal: f64,
+    /// Bounding-box diagonal of every frame's points together.
+    pub set_bbox_diagonal: f64,
+    /// The median of the frames' own bounding-box diagonals.
+    pub median_frame_diagonal: f64,
+    /// Frames whose own diagonal is more than [`OUTLIER_FACTOR`] times the median or less
+    /// than its 1/[`OUTLIER_FACTOR`]: a stray vertex, another unit or a damaged file.
+    pub outlier_frames: Vec<OutlierFrame>,
     /// V − E + F of the connectivity.
     pub euler_characteristic: i64,
     /// The distinct labels, or `None` for an unlabelled set.
     pub labels: Option<Vec<String>>,
+}
+
+/// How far (as a factor) a frame's bounding-box diagonal may be from the median frame's before
+/// [`QualityReport::outlier_frames`] lists it; poses of one animation stay well within it.
+pub const OUTLIER_FACTOR: f64 = 2.0;
+
+/// A frame whose extent is far from the rest.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OutlierFrame {
+    pub index: usize,
+    pub name: String,
+    pub diagonal: f64,
 }
 
 impl QualityReport {
@@ -32,6 +51,24 @@ impl QualityReport {
         let mut report = Self::of_mesh(set.frame(0), set.faces());
         report.meshes = set.len();
         report.labels = set.distinct_labels();
+        let diagonals: Vec<f64> = (0..set.len())
+            .map(|i| bbox_diagonal(set.frame(i)))
+            .collect();
+        let mut sorted = diagonals.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        report.median_frame_diagonal = median;
+        report.set_bbox_diagonal = bbox_diagonal(set.positions());
+        report.outlier_frames = diagonals
+            .iter()
+            .enumerate()
+            .filter(|&(_, &d)| d > OUTLIER_FACTOR * median || d * OUTLIER_FACTOR < median)
+            .map(|(index, &diagonal)| OutlierFrame {
+                index,
+                name: set.names()[index].clone(),
+                diagonal,
+            })
+            .collect();
         report
     }
 
@@ -60,6 +97,9 @@ impl QualityReport {
             components,
             unused_vertices: unused,
             bbox_diagonal: diagonal,
+            set_bbox_diagonal: diagonal,
+            median_frame_diagonal: diagonal,
+            outlier_frames: Vec::new(),
             euler_characteristic: positions.len() as i64 - unique as i64 + faces.len() as i64,
             labels: None,
         }
@@ -178,5 +218,28 @@ mod tests {
         let r = QualityReport::of_mesh(&positions, &faces);
         assert_eq!(r.nonmanifold_edges, 1);
         assert_eq!(r.degenerate_faces, 1);
+    }
+
+    #[test]
+    fn the_set_diagonal_spans_every_frame_and_a_stray_frame_is_flagged() {
+        let faces = vec![[0, 1, 2]];
+        let tri = |dx: f32, far: f32| vec![[dx, 0., 0.], [dx + 1., 0., 0.], [dx, far, 0.]];
+        let mut positions = Vec::new();
+        for i in 0..5 {
+            // Frame 3 has one vertex 25 diagonals away, as a flipped byte would put it.
+            positions.extend(tri(i as f32, if i == 3 { 25.0 } else { 1.0 }));
+        }
+        let names = (0..5).map(|i| format!("f{i}")).collect();
+        let set = MeshSet::from_flat(faces, 3, positions, names).unwrap();
+        let r = QualityReport::of(&set);
+        assert!((r.bbox_diagonal - 2f64.sqrt()).abs() < 1e-6);
+        assert!((r.median_frame_diagonal - 2f64.sqrt()).abs() < 1e-6);
+        // x spans 0..5, y 0..25.
+        assert!((r.set_bbox_diagonal - (25.0f64 + 625.0).sqrt()).abs() < 1e-4);
+        assert_eq!(r.outlier_frames.len(), 1);
+        assert_eq!(
+            (r.outlier_frames[0].index, r.outlier_frames[0].name.as_str()),
+            (3, "f3")
+        );
     }
 }

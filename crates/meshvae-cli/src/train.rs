@@ -87,7 +87,7 @@ pub struct TrainArgs {
     #[arg(long, requires = "train_list")]
     val_list: Option<PathBuf>,
     /// Fraction of the training meshes moved to the validation set, whose loss alone chooses
-    /// the best checkpoint (at least one mesh; 0 = choose on the training loss)
+    /// the best checkpoint (at least one mesh, two from ten training meshes on; 0 = choose on the training loss)
     /// [default: 0.1].
     #[arg(long)]
     val_fraction: Option<f64>,

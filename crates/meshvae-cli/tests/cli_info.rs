@@ -171,7 +171,16 @@ fn pack_then_info_reads_the_cache() {
         &["--out", "set.txt", ".mvset or .glb"],
     );
     assert!(!bad.exists());
-    // A corrupt cache is an error naming it.
+    // One flipped bit in the positions (a coordinate that stays finite) is caught by the
+    // checksum, naming the file; so is garbage.
+    let mut bytes = std::fs::read(&cache).unwrap();
+    let header = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    bytes[8 + header + 2] ^= 0x01;
+    std::fs::write(&cache, &bytes).unwrap();
+    assert_fails_with(
+        &meshvae(&["info", cache.to_str().unwrap()]),
+        &["set.mvset", "checksum"],
+    );
     std::fs::write(&cache, b"garbage").unwrap();
     assert_fails_with(&meshvae(&["info", cache.to_str().unwrap()]), &["set.mvset"]);
     std::fs::remove_dir_all(&dir).unwrap();

@@ -1,17 +1,39 @@
 //! [`Checkpoint`]: the whole training state after an epoch, in one safetensors file, so that an
-//! interrupted run resumes exactly where the last finished epoch left it: the model's trainable
-//! and batch-norm tensors (`model.*`), Adam's moments and step (`adam.*`), and the epoch, random
-//! state, best validation and test losses so far, learning-rate schedule and training time
-//! (`meta.*`). One file, written atomically: a kill at any
-//! moment leaves either the previous checkpoint or the new one.
+//! interrupted run resumes exactly where the last finished epoch left it. Written atomically (a
+//! kill at any moment leaves either the previous checkpoint or the new one) with the
+//! `mesh_io::stamped` convention (`format` = `meshvae-checkpoint`, `version` = `2`, `writer`,
+//! `checksum`, verified on loading).
+//!
+//! Tensors: the model's variables as `model.<name>` (the names of the weights file), Adam's
+//! state as `adam.step`, `adam.restarted_at`, `adam.m.<name>` and `adam.v.<name>`, and the
+//! progress counters as `progress.*`, each described by the metadata entry `progress` (see
+//! [`PROGRESS_DOC`]). Version-1 checkpoints (`adam.adam.*` and three-number `meta.*` tensors)
+//! still load.
 
 use crate::adam::Adam;
 use crate::error::{Result, VaeError};
-use crate::model::MeshVae;
+use crate::model::{MeshVae, stamped_error, tensor_entry};
 use crate::schedule::ScheduleState;
 use candle_core::{DType, Device, Tensor};
-use std::collections::HashMap;
+use mesh_io::stamped::{Stamp, format_of, read_stamped, write_stamped};
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
+
+/// What a checkpoint's metadata says it is.
+pub const CHECKPOINT_STAMP: Stamp = Stamp {
+    format: "meshvae-checkpoint",
+    version: 2,
+};
+
+/// The `progress` metadata entry: what each counter tensor holds.
+pub const PROGRESS_DOC: &str = "progress.epochs_done: epochs finished; progress.best_epoch: the \
+    epoch whose weights weights.safetensors holds (lowest validation loss, or training loss \
+    without validation meshes; 0 before any) and progress.best_loss its loss (inf before any); \
+    progress.best_test_epoch and progress.best_test_loss: the same on the test loss; \
+    progress.rng: the training random stream's xoshiro256 state after the last epoch, four \
+    u64 words as eight u32 (high word first); progress.schedule: the learning-rate schedule's \
+    state; progress.seconds: training seconds over every resumed part; adam.step: optimizer \
+    steps taken; adam.restarted_at: the step of the last moment reset, if any";
 
 /// Training progress besides the tensors.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -39,13 +61,12 @@ pub struct Checkpoint;
 impl Checkpoint {
     /// Writes the state of `model`, `adam` and `progress` to `path` atomically.
     pub fn save(path: &Path, model: &MeshVae, adam: &Adam, progress: &Progress) -> Result<()> {
-        let mut map: HashMap<String, Tensor> = HashMap::new();
+        let mut map: BTreeMap<String, Tensor> = BTreeMap::new();
         for (name, var) in model.trainable_vars().into_iter().chain(model.state_vars()) {
             map.insert(format!("model.{name}"), var.as_tensor().clone());
         }
-        for (name, t) in adam.state_tensors()? {
-            map.insert(format!("adam.{name}"), t);
-        }
+        // Adam's own names start with `adam.`.
+        map.extend(adam.state_tensors()?);
         let cpu = Device::Cpu;
         // safetensors has no u64 in candle: the random state as eight u32 words.
         let words: Vec<u32> = progress
@@ -53,40 +74,51 @@ impl Checkpoint {
             .iter()
             .flat_map(|&w| [(w >> 32) as u32, w as u32])
             .collect();
-        map.insert("meta.rng".into(), Tensor::new(words.as_slice(), &cpu)?);
+        let count = |n: usize| Tensor::new(&[n as i64], &cpu);
+        let real = |x: f64| Tensor::new(&[x], &cpu);
+        map.insert("progress.rng".into(), Tensor::new(words.as_slice(), &cpu)?);
+        map.insert("progress.epochs_done".into(), count(progress.epoch)?);
+        map.insert("progress.best_epoch".into(), count(progress.best_epoch)?);
         map.insert(
-            "meta.epoch".into(),
-            Tensor::new(
-                &[
-                    progress.epoch as i64,
-                    progress.best_epoch as i64,
-                    progress.best_test_epoch as i64,
-                ],
-                &cpu,
-            )?,
+            "progress.best_test_epoch".into(),
+            count(progress.best_test_epoch)?,
+        );
+        map.insert("progress.best_loss".into(), real(progress.best_loss)?);
+        map.insert(
+            "progress.best_test_loss".into(),
+            real(progress.best_test_loss)?,
         );
         map.insert(
-            "meta.best_loss".into(),
-            Tensor::new(&[progress.best_loss, progress.best_test_loss], &cpu)?,
-        );
-        map.insert(
-            "meta.schedule".into(),
+            "progress.schedule".into(),
             Tensor::new(progress.schedule.to_vec().as_slice(), &cpu)?,
         );
-        map.insert(
-            "meta.seconds".into(),
-            Tensor::new(&[progress.seconds], &cpu)?,
-        );
-        save_atomic(path, &map)
+        map.insert("progress.seconds".into(), real(progress.seconds)?);
+        let config = serde_json::to_string(model.config())
+            .map_err(|e| VaeError::model(path, format!("config to JSON: {e}")))?;
+        let metadata = BTreeMap::from([
+            ("config".to_string(), config),
+            ("progress".to_string(), PROGRESS_DOC.to_string()),
+        ]);
+        let entries = map.iter().map(|(n, t)| tensor_entry(n, t)).collect();
+        write_stamped(path, CHECKPOINT_STAMP, metadata, entries)?;
+        Ok(())
     }
 
     /// Restores `model` and `adam` from `path` and returns the progress.
     pub fn load(path: &Path, model: &mut MeshVae, adam: &mut Adam) -> Result<Progress> {
-        let map = read(path, model)?;
+        let (version, map) = read(path, model)?;
         set_model(path, &map, model)?;
+        // Version 1 prefixed Adam's own `adam.` names once more.
         let adam_state: HashMap<String, Tensor> = map
             .iter()
-            .filter_map(|(k, v)| k.strip_prefix("adam.").map(|k| (k.to_string(), v.clone())))
+            .filter_map(|(k, v)| {
+                let k = if version == 1 {
+                    k.strip_prefix("adam.")?
+                } else {
+                    k
+                };
+                k.starts_with("adam.").then(|| (k.to_string(), v.clone()))
+            })
             .collect();
         adam.load_state(&adam_state)
             .map_err(|e| VaeError::model(path, format!("optimiser state: {e}")))?;
@@ -94,15 +126,54 @@ impl Checkpoint {
             map.get(name)
                 .ok_or_else(|| VaeError::model(path, format!("no tensor `{name}`")))
         };
-        let words: Vec<u32> = get("meta.rng")?.to_dtype(DType::U32)?.to_vec1()?;
-        let epochs: Vec<i64> = get("meta.epoch")?.to_vec1()?;
-        let best: Vec<f64> = get("meta.best_loss")?.to_vec1()?;
-        // Checkpoints written before the test-selected weights existed have two epochs and
-        // one loss.
+        let f64s =
+            |name: &str| -> Result<Vec<f64>> { Ok(get(name)?.to_dtype(DType::F64)?.to_vec1()?) };
+        let i64s =
+            |name: &str| -> Result<Vec<i64>> { Ok(get(name)?.to_dtype(DType::I64)?.to_vec1()?) };
+        let (words, epochs, best, schedule, seconds) = if version == 1 {
+            (
+                get("meta.rng")?.to_dtype(DType::U32)?.to_vec1::<u32>()?,
+                i64s("meta.epoch")?,
+                f64s("meta.best_loss")?,
+                map.get("meta.schedule"),
+                map.get("meta.seconds"),
+            )
+        } else {
+            let one = |name: &str| -> Result<i64> {
+                i64s(name)?
+                    .first()
+                    .copied()
+                    .ok_or_else(|| VaeError::model(path, format!("empty tensor `{name}`")))
+            };
+            let real = |name: &str| -> Result<f64> {
+                f64s(name)?
+                    .first()
+                    .copied()
+                    .ok_or_else(|| VaeError::model(path, format!("empty tensor `{name}`")))
+            };
+            (
+                get("progress.rng")?
+                    .to_dtype(DType::U32)?
+                    .to_vec1::<u32>()?,
+                vec![
+                    one("progress.epochs_done")?,
+                    one("progress.best_epoch")?,
+                    one("progress.best_test_epoch")?,
+                ],
+                vec![
+                    real("progress.best_loss")?,
+                    real("progress.best_test_loss")?,
+                ],
+                Some(get("progress.schedule")?),
+                Some(get("progress.seconds")?),
+            )
+        };
+        // Version-1 checkpoints written before the test-selected weights existed have two
+        // epochs and one loss.
         let (8, &[epoch, best_epoch, ref test_epoch @ ..], &[best_loss, ref test_loss @ ..]) =
             (words.len(), epochs.as_slice(), best.as_slice())
         else {
-            return Err(VaeError::model(path, "malformed meta tensors"));
+            return Err(VaeError::model(path, "malformed progress tensors"));
         };
         let best_test_epoch = test_epoch.first().copied().unwrap_or(0);
         let best_test_loss = test_loss.first().copied().unwrap_or(f64::INFINITY);
@@ -110,12 +181,12 @@ impl Checkpoint {
         for (r, pair) in rng.iter_mut().zip(words.chunks_exact(2)) {
             *r = ((pair[0] as u64) << 32) | pair[1] as u64;
         }
-        let schedule = match map.get("meta.schedule") {
+        let schedule = match schedule {
             Some(t) => ScheduleState::from_slice(&t.to_dtype(DType::F64)?.to_vec1::<f64>()?)
-                .ok_or_else(|| VaeError::model(path, "malformed meta.schedule"))?,
+                .ok_or_else(|| VaeError::model(path, "malformed schedule state"))?,
             None => ScheduleState::default(),
         };
-        let seconds = match map.get("meta.seconds") {
+        let seconds = match seconds {
             Some(t) => t.to_dtype(DType::F64)?.to_vec1::<f64>()?.first().copied(),
             None => None,
         };
@@ -133,17 +204,29 @@ impl Checkpoint {
 
     /// Restores only the model's tensors (to use a model whose best weights were not saved).
     pub fn load_model_only(path: &Path, model: &mut MeshVae) -> Result<()> {
-        let map = read(path, model)?;
+        let (_, map) = read(path, model)?;
         set_model(path, &map, model)
     }
 }
 
-fn read(path: &Path, model: &MeshVae) -> Result<HashMap<String, Tensor>> {
+/// The checkpoint's version and tensors, its checksum verified.
+fn read(path: &Path, model: &MeshVae) -> Result<(u32, HashMap<String, Tensor>)> {
     if !path.is_file() {
         return Err(VaeError::model(path, "no such checkpoint"));
     }
-    candle_core::safetensors::load(path, model.device())
-        .map_err(|e| VaeError::model(path, format!("unreadable checkpoint: {e}")))
+    let bytes = std::fs::read(path).map_err(|e| VaeError::io(path, e))?;
+    // Version-1 checkpoints carry no metadata at all.
+    let version = match format_of(&bytes) {
+        None => 1,
+        Some(_) => {
+            read_stamped(&bytes, path, CHECKPOINT_STAMP)
+                .map_err(stamped_error)?
+                .version
+        }
+    };
+    let map = candle_core::safetensors::load_buffer(&bytes, model.device())
+        .map_err(|e| VaeError::model(path, format!("unreadable checkpoint: {e}")))?;
+    Ok((version, map))
 }
 
 fn set_model(path: &Path, map: &HashMap<String, Tensor>, model: &mut MeshVae) -> Result<()> {
@@ -168,28 +251,4 @@ fn set_model(path: &Path, map: &HashMap<String, Tensor>, model: &mut MeshVae) ->
         var.set(&t.to_dtype(var.dtype())?)?;
     }
     Ok(())
-}
-
-/// candle's `safetensors::save` writes tensor by tensor, without first building the whole file
-/// in memory (a checkpoint of elephant-gallop is ~600 MB), but not atomically: so it writes a
-/// hidden temporary file beside `path` and renames it.
-fn save_atomic(path: &Path, map: &HashMap<String, Tensor>) -> Result<()> {
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{file_name}.tmp"));
-    let result = candle_core::safetensors::save(map, &tmp)
-        .map_err(VaeError::from)
-        .and_then(|()| {
-            // On disk before the rename, so that a crash cannot leave a renamed, empty file.
-            std::fs::File::open(&tmp)
-                .and_then(|f| f.sync_all())
-                .and_then(|()| std::fs::rename(&tmp, path))
-                .map_err(|e| VaeError::io(path, e))
-        });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }

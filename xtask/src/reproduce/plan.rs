@@ -176,7 +176,7 @@ fn authors_protocol(train: &mut TrainConfig) {
 pub const PROTOCOLS: &[Protocol] = &[
     Protocol {
         id: "validation",
-        description: "validation: 10 % of each seed's training half (at least one mesh, whole \
+        description: "validation: 10 % of each seed's training half (at least one mesh, two from ten on, whole \
                       shapes, drawn from the seed) is held out as a validation set, and the reported weights \
                       are those of the epoch with the lowest validation loss; no test mesh \
                       influences training or the choice of checkpoint (`meshvae train`'s \

@@ -1,22 +1,39 @@
 //! Saving and loading a model's variables: one safetensors file with every trainable and state
-//! tensor, and the model's configuration (JSON) in the header's `__metadata__`, so that weights
-//! of another configuration are refused by name rather than by a shape accident.
-//!
-//! The file is written by hand (the format is an 8-byte little-endian header length, a JSON
-//! header, then the raw little-endian data) so that it goes through
-//! `mesh_io::atomic::write_atomic`; it is read back with candle's safetensors loader.
+//! tensor, and in the header's `__metadata__` the `mesh_io::stamped` convention (`format` =
+//! `meshvae-weights`, `version`, `writer`, `checksum`, verified on loading), the model's
+//! configuration (`config`, JSON), so that weights of another configuration are refused by name
+//! rather than by a shape accident, and what the names alone do not say: `tied` (JSON: each
+//! weight the file does not hold because it is another tensor reused) and `layout` (how the
+//! tensors are named and shaped).
 
 use super::MeshVae;
 use crate::config::ModelConfig;
 use crate::error::{Result, VaeError};
 use candle_core::{DType, Tensor};
-use serde_json::{Map, Value, json};
+use mesh_io::stamped::{
+    Dtype, Entry, Stamp, f32_bytes, f64_bytes, read_stamped, u32_bytes, write_stamped,
+};
+use serde_json::{Value, json};
 use std::collections::{BTreeMap, HashMap};
-use std::io::Write;
 use std::path::Path;
 
-/// `__metadata__.format` of our weight files.
-pub const WEIGHTS_FORMAT: &str = "meshvae-weights";
+/// What a weights file's metadata says it is (version 1: before the checksum, `tied` and
+/// `layout`).
+pub const WEIGHTS_STAMP: Stamp = Stamp {
+    format: "meshvae-weights",
+    version: 2,
+};
+
+/// The `layout` metadata entry of every weights file.
+pub const WEIGHTS_LAYOUT: &str = "encoder convolution i: enc.conv{i}.weight [C_in*K, C_out], \
+    row c*K + k for input channel c and Chebyshev order k (spectral), or enc.conv{i}.w_self and \
+    enc.conv{i}.w_nb [C_in, C_out] (spatial); its batch norm enc.bn{i}.gamma, beta (trained) and \
+    running_mean, running_var (statistics) [C_out]; dense heads enc.mu.weight and \
+    enc.sigma.weight [V_L*C, latent] on the coarsest level flattened vertex-major (vertex v, \
+    channel c at v*C + c), enc.mu.bias and enc.sigma.bias [latent]; decoder dense bias \
+    dec.fc.bias [V_L*C]; decoder layer i mirrors encoder convolution i: dec.conv{i}.*, \
+    dec.bn{i}.*; conditional models add enc.mu.label_weight and enc.sigma.label_weight \
+    [labels, latent] and dec.fc.label_weight [labels, V_L*C]";
 
 impl MeshVae {
     /// Copies of every variable (trainable and state), by name. Copies: later training steps
@@ -84,8 +101,12 @@ impl MeshVae {
     pub fn save_snapshot(&self, tensors: &BTreeMap<String, Tensor>, path: &Path) -> Result<()> {
         let config = serde_json::to_string(&self.config)
             .map_err(|e| VaeError::model(path, format!("config to JSON: {e}")))?;
-        let bytes = serialize(tensors, &config)?;
-        mesh_io::atomic::write_atomic(path, |w| w.write_all(&bytes))?;
+        let metadata = BTreeMap::from([
+            ("config".to_string(), config),
+            ("tied".to_string(), tied_json(&self.config)),
+            ("layout".to_string(), WEIGHTS_LAYOUT.to_string()),
+        ]);
+        write_stamped(path, WEIGHTS_STAMP, metadata, entries(tensors))?;
         Ok(())
     }
 
@@ -93,7 +114,8 @@ impl MeshVae {
     /// Nothing is changed on error.
     pub fn load(&mut self, path: &Path) -> Result<()> {
         let data = std::fs::read(path).map_err(|e| VaeError::io(path, e))?;
-        let saved = read_config(&data).map_err(|what| VaeError::model(path, what))?;
+        let file = read_stamped(&data, path, WEIGHTS_STAMP).map_err(stamped_error)?;
+        let saved = read_config(&file.metadata).map_err(|what| VaeError::model(path, what))?;
         if saved != self.config {
             return Err(VaeError::model(
                 path,
@@ -110,68 +132,69 @@ impl MeshVae {
     }
 }
 
-/// The safetensors bytes of `tensors` (f32/f64), with `config` in the metadata.
-fn serialize(tensors: &BTreeMap<String, Tensor>, config: &str) -> Result<Vec<u8>> {
-    let mut header = Map::new();
-    header.insert(
-        "__metadata__".into(),
-        json!({ "format": WEIGHTS_FORMAT, "config": config }),
-    );
-    let mut data = Vec::new();
-    for (name, t) in tensors {
-        let start = data.len();
-        let flat = t.flatten_all()?;
-        let dtype = match t.dtype() {
-            DType::F64 => {
-                for x in flat.to_vec1::<f64>()? {
-                    data.extend_from_slice(&x.to_le_bytes());
-                }
-                "F64"
-            }
+/// The tensors as lazily converted entries, so that a big model is never twice in memory as
+/// bytes.
+pub(crate) fn entries(tensors: &BTreeMap<String, Tensor>) -> Vec<Entry<'_>> {
+    tensors.iter().map(|(name, t)| entry(name, t)).collect()
+}
+
+/// One tensor as an entry converted when written: f64, i64 and u32 keep their type, every other
+/// float is written as f32.
+pub(crate) fn entry<'a>(name: &str, t: &'a Tensor) -> Entry<'a> {
+    let dtype = match t.dtype() {
+        DType::F64 => Dtype::F64,
+        DType::I64 => Dtype::I64,
+        DType::U32 => Dtype::U32,
+        _ => Dtype::F32,
+    };
+    Entry::lazy(name, dtype, t.dims().to_vec(), move || {
+        let flat = t.flatten_all().map_err(|e| e.to_string())?;
+        let bytes: Vec<u8> = match dtype {
+            Dtype::F64 => f64_bytes(&flat.to_vec1::<f64>().map_err(|e| e.to_string())?),
+            Dtype::I64 => flat
+                .to_vec1::<i64>()
+                .map_err(|e| e.to_string())?
+                .iter()
+                .flat_map(|x| x.to_le_bytes())
+                .collect(),
+            Dtype::U32 => u32_bytes(&flat.to_vec1::<u32>().map_err(|e| e.to_string())?),
             _ => {
-                for x in flat.to_dtype(DType::F32)?.to_vec1::<f32>()? {
-                    data.extend_from_slice(&x.to_le_bytes());
-                }
-                "F32"
+                let flat = flat.to_dtype(DType::F32).map_err(|e| e.to_string())?;
+                f32_bytes(&flat.to_vec1::<f32>().map_err(|e| e.to_string())?)
             }
         };
-        header.insert(
-            name.clone(),
-            json!({ "dtype": dtype, "shape": t.dims(), "data_offsets": [start, data.len()] }),
+        Ok(bytes.into())
+    })
+}
+
+/// A damaged, foreign or newer file is a [`VaeError::Model`] naming it.
+pub(crate) fn stamped_error(e: mesh_io::MeshIoError) -> VaeError {
+    match e {
+        mesh_io::MeshIoError::Tensors { path, message } => VaeError::model(path, message),
+        other => other.into(),
+    }
+}
+
+/// The `tied` metadata entry: weights the file does not hold, and which tensor stands for each.
+pub(crate) fn tied_json(config: &ModelConfig) -> String {
+    let mut tied = serde_json::Map::new();
+    tied.insert(
+        "dec.fc.weight".into(),
+        json!("enc.mu.weight, transposed: the decoder's dense layer is z * enc.mu.weight^T + dec.fc.bias"),
+    );
+    if config.tie_decoder_convs {
+        tied.insert(
+            "dec.conv{i}.weight".into(),
+            json!("the adjoint of enc.conv{i}.weight (decoder convolutions tied to the encoder's)"),
         );
     }
-    let mut head = serde_json::to_vec(&Value::Object(header))
-        .map_err(|e| VaeError::shape("MeshVae::save", e.to_string()))?;
-    // The data starts 8-aligned (the format's recommendation): pad the header with spaces.
-    while head.len() % 8 != 0 {
-        head.push(b' ');
-    }
-    let mut out = Vec::with_capacity(8 + head.len() + data.len());
-    out.extend_from_slice(&(head.len() as u64).to_le_bytes());
-    out.extend_from_slice(&head);
-    out.extend_from_slice(&data);
-    Ok(out)
+    Value::Object(tied).to_string()
 }
 
 /// The configuration stored in a weight file's metadata.
-fn read_config(data: &[u8]) -> std::result::Result<ModelConfig, String> {
-    let len = data
-        .get(..8)
-        .map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])) as usize)
-        .ok_or("too short for a safetensors file")?;
-    let head = data
-        .get(8..8usize.saturating_add(len))
-        .ok_or("truncated safetensors header")?;
-    let header: Value =
-        serde_json::from_slice(head).map_err(|e| format!("unreadable safetensors header: {e}"))?;
-    let meta = &header["__metadata__"];
-    if meta["format"] != WEIGHTS_FORMAT {
-        return Err(format!(
-            "not a meshvae weight file (no \"format\": \"{WEIGHTS_FORMAT}\" in its metadata)"
-        ));
-    }
-    let config = meta["config"]
-        .as_str()
+fn read_config(meta: &BTreeMap<String, String>) -> std::result::Result<ModelConfig, String> {
+    let config = meta
+        .get("config")
         .ok_or("no model config in the metadata")?;
     serde_json::from_str(config).map_err(|e| format!("unreadable model config: {e}"))
 }
