@@ -53,10 +53,10 @@ mod sheet;
 mod text;
 
 pub use camera::{Bounds, MARGIN, View};
-pub use colormap::error_colors;
+pub use colormap::{error_color, error_colors};
 pub use error::RenderError;
 pub use image::{Image, MAX_PIXELS, MAX_SIDE, hstack};
 pub use lines::{Curve, LinePlot, Marker, line_plot};
 pub use plot::{MIN_PLOT_SIZE, SERIES_COLORS, Series, scatter};
 pub use raster::{MAX_RENDER_PIXELS, NEUTRAL_GREY, RenderOptions, SUPERSAMPLING, render};
-pub use sheet::{Tile, caption_height, sheet, ticks, with_colorbar};
+pub use sheet::{Tile, caption_height, sheet, ticks, with_colorbar, with_colorbar_on_top};

@@ -43,7 +43,8 @@ pub(crate) const GRID_LIGHT: RGBColor = RGBColor(242, 243, 245);
 pub const MIN_PLOT_SIZE: u32 = 120;
 
 /// A scatter plot on white: title, axis descriptions, a light grid, the series' points (joined
-/// in order if asked), and a legend when series are named. Errors: no points at all, a
+/// in order if asked), and a legend when series are named, in a band above the data (the y
+/// range grows to make room for it) so that it hides no point. Errors: no points at all, a
 /// non-finite coordinate, a size below [`MIN_PLOT_SIZE`] or too large.
 pub fn scatter(
     title: &str,
@@ -74,7 +75,15 @@ pub fn scatter(
         }
     }
     ensure_font()?;
-    let (x_range, y_range) = ranges(series);
+    let (x_range, mut y_range) = ranges(series);
+    let named = series.iter().filter(|s| !s.name.is_empty()).count();
+    if named > 0 {
+        // A band above the data for the legend, so that it covers no point.
+        let legend_px = named as f64 * 1.6 * tick_size(width, height) + 14.0;
+        let plot_px = 0.75 * f64::from(height);
+        let share = (legend_px / plot_px).min(0.5);
+        y_range.end += (y_range.end - y_range.start) * share / (1.0 - share);
+    }
     let mut rgb = vec![255u8; 3 * width as usize * height as usize];
     draw(
         &mut rgb,
@@ -143,6 +152,11 @@ fn order_color(i: usize, n: usize) -> [u8; 3] {
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// Tick-label font size of a plot of this size.
+fn tick_size(width: u32, height: u32) -> f64 {
+    (f64::from(height.min(width * 3 / 2)) / 38.0).clamp(10.0, 16.0)
+}
+
 fn draw(
     buf: &mut [u8],
     (width, height): (u32, u32),
@@ -153,7 +167,7 @@ fn draw(
     let h = f64::from(height.min(width * 3 / 2));
     let title_px = (h / 20.0).clamp(13.0, 26.0);
     let desc_px = (h / 30.0).clamp(11.0, 19.0);
-    let tick_px = (h / 38.0).clamp(10.0, 16.0);
+    let tick_px = tick_size(width, height);
     let radius = (f64::from(width.min(height)) / 150.0)
         .clamp(2.5, 6.0)
         .round() as i32;

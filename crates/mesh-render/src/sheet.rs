@@ -219,9 +219,112 @@ pub fn with_colorbar(image: &Image, max: f32, label: &str) -> Result<Image, Rend
     crate::image::hstack(&[image.clone(), panel])
 }
 
+/// The picture under a horizontal colour bar of the error map (0 on the left, `max` on the
+/// right), with tick labels beneath it and `label` on its left, in a white band on top: the
+/// first thing seen on a long sheet. The width grows only if the band needs more room.
+/// Errors: a bad image, a negative or non-finite `max`.
+pub fn with_colorbar_on_top(image: &Image, max: f32, label: &str) -> Result<Image, RenderError> {
+    image.validate("image")?;
+    if !max.is_finite() || max < 0.0 {
+        return Err(RenderError::invalid(
+            "max",
+            format!("the colour bar's maximum must be finite and >= 0, got {max}"),
+        ));
+    }
+    let font = (f64::from(image.width) / 60.0).clamp(12.0, 17.0);
+    let style = Style::new(font);
+    let font_px = font.ceil() as u32;
+    let margin = font_px;
+    let label_w = if label.is_empty() {
+        0
+    } else {
+        text::text_size(label, &style)?.0 + font_px
+    };
+    let bar_w = (image.width * 2 / 5).clamp(160, 520);
+    let bar_h = (font_px * 6 / 5).max(12);
+    let ticks = ticks(max);
+    let last_w = ticks
+        .last()
+        .map_or(Ok(0), |(_, t)| text::text_size(t, &style).map(|s| s.0))?;
+    let needed = margin + label_w + bar_w + last_w + margin;
+    let width = image.width.max(needed);
+    let band_h = margin + bar_h + 5 + font_px * 2 + margin / 2;
+    let mut out = Image::filled(width, band_h + image.height, [255; 3])?;
+    let bar_x = margin + label_w;
+    let bar_y = margin;
+    for col in 0..bar_w {
+        let t = col as f32 / (bar_w.max(2) - 1) as f32;
+        out.fill_rect(
+            bar_x + col,
+            bar_y,
+            bar_x + col + 1,
+            bar_y + bar_h,
+            error_color(t),
+        );
+    }
+    let frame = [90, 90, 96];
+    out.fill_rect(bar_x, bar_y, bar_x + bar_w, bar_y + 1, frame);
+    out.fill_rect(
+        bar_x,
+        bar_y + bar_h - 1,
+        bar_x + bar_w,
+        bar_y + bar_h,
+        frame,
+    );
+    out.fill_rect(bar_x, bar_y, bar_x + 1, bar_y + bar_h, frame);
+    out.fill_rect(
+        bar_x + bar_w - 1,
+        bar_y,
+        bar_x + bar_w,
+        bar_y + bar_h,
+        frame,
+    );
+    for (value, tick) in &ticks {
+        let t = if max > 0.0 { value / max } else { 0.0 };
+        let x = bar_x + (t * (bar_w - 1) as f32).round() as u32;
+        out.fill_rect(x, bar_y + bar_h, x + 1, bar_y + bar_h + 5, frame);
+        text::draw(
+            &mut out,
+            tick,
+            (x as i32, (bar_y + bar_h + 7) as i32),
+            Anchor::CENTER_TOP,
+            &style,
+        )?;
+    }
+    if !label.is_empty() {
+        let centre = (margin as i32, (bar_y + bar_h / 2) as i32);
+        text::draw(&mut out, label, centre, Anchor::LEFT_CENTER, &style)?;
+    }
+    out.blit(image, (width - image.width) / 2, band_h);
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_top_colour_bar_runs_from_cool_to_hot_above_the_picture() {
+        let picture = Image::filled(400, 100, [10, 200, 10]).unwrap();
+        let out = with_colorbar_on_top(&picture, 0.5, "error").unwrap();
+        assert_eq!(out.width, 400);
+        let band = out.height - 100;
+        assert!(band > 30, "band {band}");
+        // The picture sits under the band, unchanged.
+        assert_eq!(out.pixel(200, band + 50), Some([10, 200, 10]));
+        // Along the bar's middle row: the first stop on the left, the last on the right.
+        let row = (0..band)
+            .find(|&y| out.pixel(200, y) != Some([255; 3]))
+            .unwrap()
+            + 3;
+        let xs: Vec<u32> = (0..400)
+            .filter(|&x| out.pixel(x, row) != Some([255; 3]))
+            .collect();
+        let (left, right) = (xs[2], xs[xs.len() - 3]);
+        let lum = |c: [u8; 3]| c.iter().map(|&v| u32::from(v)).sum::<u32>();
+        assert!(lum(out.pixel(left, row).unwrap()) > lum(out.pixel(right, row).unwrap()));
+        assert!(with_colorbar_on_top(&picture, f32::NAN, "").is_err());
+    }
 
     #[test]
     fn ticks_are_nice_and_end_at_max() {

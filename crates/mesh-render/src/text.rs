@@ -50,6 +50,10 @@ impl Anchor {
         h: HPos::Left,
         v: VPos::Center,
     };
+    pub const CENTER_TOP: Anchor = Anchor {
+        h: HPos::Center,
+        v: VPos::Top,
+    };
 }
 
 /// How a text looks: size in pixels, colour, bold, rotated by 270° (reading bottom to top).

@@ -255,7 +255,8 @@ pub fn run(args: &RenderArgs) -> Result<(), CliError> {
         mesh_render::sheet(&tiles, columns)?
     };
     if let Some(max) = max_error {
-        image = mesh_render::with_colorbar(&image, max, "distance to ground truth")?;
+        image =
+            mesh_render::with_colorbar_on_top(&image, max, "distance to ground truth, mesh units")?;
     }
     image.save_png(&args.out)?;
     out!(

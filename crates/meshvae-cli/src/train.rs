@@ -396,7 +396,11 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
         path: args.out.clone(),
         message: e.to_string(),
     })?;
-    let meshes = trained.reconstruct(&set, &ids, &Device::Cpu)?;
+    let mut meshes = trained.reconstruct(&set, &ids, &Device::Cpu)?;
+    // Where `eval` measures them: the decoder fixes a shape up to a translation.
+    for (&i, mesh) in ids.iter().zip(meshes.iter_mut()) {
+        meshvae::align_centroids(set.frame(i), mesh);
+    }
     // Drawn before anything is written, so a failure leaves no partial output.
     let sheet = if args.sheet {
         Some(error_sheet(&set, &ids, &meshes, args.view)?)
@@ -430,9 +434,10 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Ground truth (grey) beside each reconstruction coloured by its per-vertex distance to the
-/// truth, all in one frame and on one colour scale (0 … the largest error), as the paper's
-/// reconstruction figures.
+/// Ground truth (grey) beside each reconstruction (centroid-aligned, as `eval` measures)
+/// coloured by its per-vertex distance to the truth, all in one frame and on one colour scale
+/// (0 … the largest error, the bar on top, in mesh units and % of the bounding-box diagonal of
+/// the first mesh shown, as `eval`'s relative errors), as the paper's reconstruction figures.
 fn error_sheet(
     set: &mesh_io::MeshSet,
     ids: &[usize],
@@ -461,6 +466,9 @@ fn error_sheet(
         .iter()
         .flatten()
         .fold(0f32, |m, &e| if e.is_finite() { m.max(e) } else { m });
+    let diagonal = ids
+        .first()
+        .map_or(0.0, |&i| mesh_io::bbox_diagonal(set.frame(i)));
     let mut frames: Vec<&[[f32; 3]]> = ids.iter().map(|&i| set.frame(i)).collect();
     frames.extend(recon.iter().map(|r| r.as_slice()));
     let options = mesh_render::RenderOptions {
@@ -478,12 +486,26 @@ fn error_sheet(
             caption: name.clone(),
         });
         let colors = mesh_render::error_colors(e, max);
+        let mean = e.iter().map(|&x| f64::from(x)).sum::<f64>() / e.len().max(1) as f64;
         tiles.push(mesh_render::Tile {
             image: mesh_render::render(r, set.faces(), Some(&colors), &options)?,
-            caption: format!("{name} reconstructed"),
+            caption: format!("{name} rec., mean {}", units(mean, diagonal)),
         });
     }
     let columns = if ids.len() > 1 { 4 } else { 2 };
     let sheet = mesh_render::sheet(&tiles, columns)?;
-    Ok(mesh_render::with_colorbar(&sheet, max, "per-vertex error")?)
+    let label = format!(
+        "per-vertex error, mesh units (max {})",
+        units(f64::from(max), diagonal)
+    );
+    Ok(mesh_render::with_colorbar_on_top(&sheet, max, &label)?)
+}
+
+/// A distance in mesh units and as a percentage of `diagonal`.
+fn units(d: f64, diagonal: f64) -> String {
+    if diagonal > 0.0 {
+        format!("{d:.3} = {:.2} %", 100.0 * d / diagonal)
+    } else {
+        format!("{d:.3}")
+    }
 }

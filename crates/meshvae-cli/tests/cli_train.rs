@@ -202,10 +202,30 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     let rec = dir.join("rec");
     let out = ok(&meshvae(&["reconstruct", s(&model), "--out", s(&rec)]));
     assert!(out.contains("wrote 4 reconstructed meshes"), "{out}");
-    let objs = std::fs::read_dir(&rec).unwrap().count();
-    assert_eq!(objs, 4);
-    // With --sheet: truth beside reconstruction for the 4 test meshes, 2 pairs per row, plus a
-    // colour bar on the right.
+    let objs: Vec<_> = std::fs::read_dir(&rec)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(objs.len(), 4);
+    // Written where `eval` measures them: each centroid on its original's.
+    let centroid = |path: &std::path::Path| {
+        let mesh = mesh_io::read_mesh(path).unwrap().value;
+        let n = mesh.positions.len() as f64;
+        let mut c = [0.0f64; 3];
+        for p in &mesh.positions {
+            for k in 0..3 {
+                c[k] += f64::from(p[k]) / n;
+            }
+        }
+        c
+    };
+    for obj in &objs {
+        let (a, b) = (centroid(obj), centroid(&set.join(obj.file_name().unwrap())));
+        let gap = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
+        assert!(gap < 1e-4, "{}: centroid {gap} away", obj.display());
+    }
+    // With --sheet: truth beside reconstruction for the 4 test meshes, 2 pairs per row, under
+    // a colour bar.
     let rec_sheet = dir.join("rec-sheet");
     let out = ok(&meshvae(&[
         "reconstruct",
@@ -220,10 +240,18 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     let bytes = std::fs::read(rec_sheet.join("sheet.png")).unwrap();
     let image = mesh_render::Image::decode_png(&bytes).unwrap();
     assert!(
-        image.width > 4 * 256 && image.height >= 2 * 256,
+        image.width >= 4 * 256 && image.height > 2 * 256 + 40,
         "{}x{}",
         image.width,
         image.height
+    );
+    // The bar heads the sheet: its hottest colour (the last column but the frame) sits in the
+    // top band.
+    let hot = mesh_render::error_color(1.0);
+    let near = |c: [u8; 3]| (0..3).all(|k| c[k].abs_diff(hot[k]) <= 6);
+    assert!(
+        (0..60).any(|y| (0..image.width).any(|x| image.pixel(x, y).is_some_and(near))),
+        "no colour bar at the top"
     );
     fails_with(
         &meshvae(&[

@@ -47,6 +47,20 @@ fn centroid(points: impl ExactSizeIterator<Item = [f64; 3]>) -> [f64; 3] {
     c.map(|x| x / n)
 }
 
+/// Moves `mesh` so that its centroid is `truth`'s: the alignment every error of [`error_report`]
+/// but the rigid one is measured after, so written reconstructions sit where the errors say.
+pub fn align_centroids(truth: &[Point], mesh: &mut [[f64; 3]]) {
+    let (a, b) = (
+        centroid(truth.iter().map(widen)),
+        centroid(mesh.iter().copied()),
+    );
+    for p in mesh.iter_mut() {
+        for k in 0..3 {
+            p[k] += a[k] - b[k];
+        }
+    }
+}
+
 fn widen(p: &Point) -> [f64; 3] {
     p.map(f64::from)
 }
@@ -165,6 +179,20 @@ pub fn mean_shape(meshes: &[&[Point]]) -> Vec<[f64; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn aligned_centroids_coincide_and_shapes_keep() {
+        let truth: Vec<Point> = vec![[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 4.0, 1.0]];
+        let mut mesh: Vec<[f64; 3]> = vec![[5.0, 5.0, 5.0], [7.5, 5.0, 5.0], [5.0, 9.0, 6.0]];
+        let before = mesh.clone();
+        align_centroids(&truth, &mut mesh);
+        let c = centroid(mesh.iter().copied());
+        assert!((c[0] - 2.0 / 3.0).abs() < 1e-12 && (c[1] - 4.0 / 3.0).abs() < 1e-12);
+        assert!((c[2] - 1.0 / 3.0).abs() < 1e-12);
+        for (p, q) in mesh.iter().zip(&before) {
+            assert!(((p[0] - q[0]) - (mesh[0][0] - before[0][0])).abs() < 1e-12);
+        }
+    }
 
     #[test]
     fn rms_ignores_translation_and_matches_a_hand_computation() {

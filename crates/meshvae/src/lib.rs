@@ -91,7 +91,7 @@ pub use embed::{
     loop_measure,
 };
 pub use error::{Result, VaeError};
-pub use eval::{ErrorReport, error_report, mean_shape};
+pub use eval::{ErrorReport, align_centroids, error_report, mean_shape};
 pub use folder::{
     DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE, ModelFolder, ModelSpec, SplitFile, TrainConfig,
     TrainedModel,
