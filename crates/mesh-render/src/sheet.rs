@@ -178,27 +178,11 @@ pub fn with_colorbar(image: &Image, max: f32, label: &str) -> Result<Image, Rend
             error_color(t),
         );
     }
-    let frame = [90, 90, 96];
-    panel.fill_rect(bar_x, bar_y, bar_x + bar_w, bar_y + 1, frame);
-    panel.fill_rect(
-        bar_x,
-        bar_y + bar_h - 1,
-        bar_x + bar_w,
-        bar_y + bar_h,
-        frame,
-    );
-    panel.fill_rect(bar_x, bar_y, bar_x + 1, bar_y + bar_h, frame);
-    panel.fill_rect(
-        bar_x + bar_w - 1,
-        bar_y,
-        bar_x + bar_w,
-        bar_y + bar_h,
-        frame,
-    );
+    outline(&mut panel, (bar_x, bar_y), (bar_w, bar_h));
     for (value, tick) in &ticks {
         let t = if max > 0.0 { value / max } else { 0.0 };
         let y = bar_y + ((1.0 - t) * (bar_h - 1) as f32).round() as u32;
-        panel.fill_rect(bar_x + bar_w, y, bar_x + bar_w + tick_len, y + 1, frame);
+        panel.fill_rect(bar_x + bar_w, y, bar_x + bar_w + tick_len, y + 1, FRAME);
         text::draw(
             &mut panel,
             tick,
@@ -217,6 +201,17 @@ pub fn with_colorbar(image: &Image, max: f32, label: &str) -> Result<Image, Rend
         text::draw(&mut panel, &fitted, centre, Anchor::CENTER, &vertical)?;
     }
     crate::image::hstack(&[image.clone(), panel])
+}
+
+/// The colour of a bar's frame and tick marks.
+const FRAME: [u8; 3] = [90, 90, 96];
+
+/// A one-pixel frame around the `w`×`h` rectangle at `(x, y)`.
+fn outline(image: &mut Image, (x, y): (u32, u32), (w, h): (u32, u32)) {
+    image.fill_rect(x, y, x + w, y + 1, FRAME);
+    image.fill_rect(x, y + h - 1, x + w, y + h, FRAME);
+    image.fill_rect(x, y, x + 1, y + h, FRAME);
+    image.fill_rect(x + w - 1, y, x + w, y + h, FRAME);
 }
 
 /// The picture under a horizontal colour bar of the error map (0 on the left, `max` on the
@@ -262,27 +257,11 @@ pub fn with_colorbar_on_top(image: &Image, max: f32, label: &str) -> Result<Imag
             error_color(t),
         );
     }
-    let frame = [90, 90, 96];
-    out.fill_rect(bar_x, bar_y, bar_x + bar_w, bar_y + 1, frame);
-    out.fill_rect(
-        bar_x,
-        bar_y + bar_h - 1,
-        bar_x + bar_w,
-        bar_y + bar_h,
-        frame,
-    );
-    out.fill_rect(bar_x, bar_y, bar_x + 1, bar_y + bar_h, frame);
-    out.fill_rect(
-        bar_x + bar_w - 1,
-        bar_y,
-        bar_x + bar_w,
-        bar_y + bar_h,
-        frame,
-    );
+    outline(&mut out, (bar_x, bar_y), (bar_w, bar_h));
     for (value, tick) in &ticks {
         let t = if max > 0.0 { value / max } else { 0.0 };
         let x = bar_x + (t * (bar_w - 1) as f32).round() as u32;
-        out.fill_rect(x, bar_y + bar_h, x + 1, bar_y + bar_h + 5, frame);
+        out.fill_rect(x, bar_y + bar_h, x + 1, bar_y + bar_h + 5, FRAME);
         text::draw(
             &mut out,
             tick,
