@@ -50,7 +50,7 @@ mod twins;
 pub use error::{MeshIoError, Result, Warning};
 pub use format::{MeshFormat, read_mesh, write_mesh};
 pub use mesh::{Face, MeshSet, Point, TriMesh, bbox, bbox_diagonal, check_same_connectivity};
-pub use quality::QualityReport;
+pub use quality::{OUTLIER_FACTOR, OutlierFrame, QualityReport};
 pub use set::{load_files, load_folder, load_set, write_folder};
 pub use twins::ShapeGroups;
 
