@@ -5,8 +5,8 @@ straightforward PyTorch 2 CPU implementation of the same network" (2 threads, f3
 This is that implementation, written the way CoMA's and SpiralNet++'s PyTorch code is: sparse
 Chebyshev recursion with `torch.sparse.mm`, `nn.BatchNorm1d`, `nn.Linear`, autograd and
 `torch.optim.Adam`, activations kept vertex-major (`[V, B, C]`, so the sparse products need no
-copies). It reads the operators from a meshvae model folder's `hierarchy.json`, so
-both run the same network on the same sparse matrices:
+copies). It reads the operators from a meshvae model folder's `hierarchy.safetensors` (or the
+`hierarchy.json` of older folders), so both run the same network on the same sparse matrices:
 
     CCPC, spectral convolution (K = 3), 9 channels, latent 128, batch norm after every
     convolution but the encoder's last (linear) and the decoder's last, tanh elsewhere,
@@ -23,6 +23,7 @@ criterion bench `train`: a step's cost does not depend on the values.
 """
 
 import argparse
+import array
 import json
 import resource
 import statistics
@@ -34,8 +35,53 @@ import torch
 from torch import nn
 
 
+# safetensors dtypes of the hierarchy file and their `array` type codes (little-endian host).
+ARRAY_CODES = {"U16": "H", "U32": "I", "U64": "Q", "F32": "f", "F64": "d"}
+
+
+def read_hierarchy(folder):
+    """The hierarchy of a model folder in the layout of version 1's JSON (`levels[i]` with
+    `vertex_count` and `laplacian`, `pooling[i]` with `pool` and `depool`, each matrix a dict
+    of rows, cols, indptr, indices, values). Version 2 is a safetensors file: an 8-byte header
+    length, a JSON header (`__metadata__["hierarchy"]` holds the sizes), then the arrays."""
+    legacy = folder / "hierarchy.json"
+    path = folder / "hierarchy.safetensors"
+    if not path.is_file() and legacy.is_file():
+        return json.loads(legacy.read_text())["hierarchy"]
+    data = path.read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8 : 8 + n])
+    outline = json.loads(header["__metadata__"]["hierarchy"])
+    body = data[8 + n :]
+
+    def tensor(name):
+        info = header[name]
+        start, end = info["data_offsets"]
+        return array.array(ARRAY_CODES[info["dtype"]], body[start:end]).tolist()
+
+    def matrix(prefix, size):
+        parts = {k: tensor(f"{prefix}.{k}") for k in ("indptr", "indices", "values")}
+        return {"rows": size["rows"], "cols": size["cols"], **parts}
+
+    levels = [
+        {
+            "vertex_count": level["vertex_count"],
+            "laplacian": matrix(f"level.{i}.laplacian", level["laplacian"]),
+        }
+        for i, level in enumerate(outline["levels"])
+    ]
+    pooling = [
+        {
+            "pool": matrix(f"pooling.{i}.pool", step["pool"]),
+            "depool": matrix(f"pooling.{i}.depool", step["depool"]),
+        }
+        for i, step in enumerate(outline["pooling"])
+    ]
+    return {"levels": levels, "pooling": pooling}
+
+
 def csr(m):
-    """A `hierarchy.json` CSR matrix as a torch sparse COO tensor (f32). COO, not CSR: the
+    """A hierarchy's CSR matrix as a torch sparse COO tensor (f32). COO, not CSR: the
     backward of `torch.sparse.mm` with a CSR matrix sorts its transpose on every call."""
     indptr = torch.tensor(m["indptr"], dtype=torch.int64)
     rows = torch.repeat_interleave(torch.arange(m["rows"]), indptr[1:] - indptr[:-1])
@@ -131,16 +177,15 @@ def loss(model, x, eps):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("model", type=Path, help="a meshvae model folder (its hierarchy.json)")
+    ap.add_argument("model", type=Path, help="a meshvae model folder (its hierarchy)")
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--batch", type=int, default=32)
     args = ap.parse_args()
-    path = args.model / "hierarchy.json"
     try:
-        hierarchy = json.loads(path.read_text())["hierarchy"]
-    except (OSError, KeyError, json.JSONDecodeError) as e:
-        sys.exit(f"{path}: not a meshvae hierarchy ({e})")
+        hierarchy = read_hierarchy(args.model)
+    except (OSError, KeyError, ValueError, json.JSONDecodeError) as e:
+        sys.exit(f"{args.model}: no readable meshvae hierarchy ({e})")
     if args.steps < 4:
         sys.exit("--steps: at least 4 (the first three are dropped)")
     torch.set_num_threads(args.threads)

@@ -142,7 +142,8 @@ impl Hierarchy {
     }
 
     /// Reads a hierarchy file written by :meth:`save` (or by ``meshvae train``: a model folder's
-    /// ``hierarchy.json``), checking it; nothing is recomputed. A missing, unreadable or invalid
+    /// ``hierarchy.safetensors``, or the ``hierarchy.json`` of older folders), checking it;
+    /// nothing is recomputed. A missing, unreadable or invalid
     /// file raises ``FileError``.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
@@ -154,8 +155,8 @@ impl Hierarchy {
         }
     }
 
-    /// Writes the hierarchy to ``path`` in the project's format (JSON with a format tag and
-    /// version, the file ``meshvae train`` keeps in a model folder), atomically.
+    /// Writes the hierarchy to ``path`` in the project's format (safetensors with a format tag,
+    /// version and checksum, the file ``meshvae train`` keeps in a model folder), atomically.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| self.inner.save(&path)).map_err(to_py)
     }

@@ -88,7 +88,7 @@ fn flat_positions(meshes: Vec<Vec<[f64; 3]>>) -> Vec<f32> {
 #[pymethods]
 impl Model {
     /// Reads a model folder written by ``meshvae train`` (config.json, weights.safetensors,
-    /// hierarchy.json, normalization.json, split.json, template.obj) with its best weights.
+    /// hierarchy.safetensors, normalization.json, split.json, template.obj) with its best weights.
     /// A missing folder raises :class:`FileError`; a foreign or inconsistent one
     /// :class:`InputError`.
     #[staticmethod]

@@ -148,25 +148,32 @@ def test_encode_decode_equals_cli_reconstruct_on_horse_gallop(cli, horse_path, t
 
 def test_every_safetensors_file_reads_with_the_safetensors_package(trained, tmp_path):
     """Any safetensors reader opens what a model folder holds, the metadata follows one
-    convention, names the tied decoder weight and explains the checkpoint's counters."""
+    convention, names the tied decoder weight and explains the checkpoint's counters; the
+    checkpoint does not repeat the weights."""
     import zlib
 
     from safetensors import safe_open
 
     files = sorted(trained[1].glob("*.safetensors"))
     names = {f.name for f in files}
-    assert {"weights.safetensors", "checkpoint.safetensors"} <= names, names
+    wanted = {"weights.safetensors", "checkpoint.safetensors", "hierarchy.safetensors"}
+    assert wanted <= names, names
+    formats = ("meshvae-weights", "meshvae-checkpoint", "meshvae-hierarchy")
+    with safe_open(trained[1] / "weights.safetensors", "np") as f:
+        weights_epoch = int(f.metadata()["epoch"])
     for path in files:
         with safe_open(path, "np") as f:
             meta = f.metadata()
-            assert meta["format"] in ("meshvae-weights", "meshvae-checkpoint"), path
+            assert meta["format"] in formats, path
             assert int(meta["version"]) >= 2 and meta["writer"].startswith("meshvae ")
             data = path.read_bytes()
             header = int.from_bytes(data[:8], "little")
             assert meta["checksum"] == f"crc32:{zlib.crc32(data[8 + header:]):08x}", path
             for key in f.keys():
                 assert f.get_tensor(key).size > 0, (path, key)
-            if meta["format"] == "meshvae-weights":
+            if meta["format"] == "meshvae-hierarchy":
+                assert "levels" in meta["hierarchy"] and "level.0.laplacian.values" in f.keys()
+            elif meta["format"] == "meshvae-weights":
                 assert "dec.fc.weight" in meta["tied"] and "enc.mu.weight" in meta["tied"]
                 assert "dec.fc.weight" not in f.keys() and "enc.mu.weight" in f.keys()
                 assert "layout" in meta and "config" in meta
@@ -174,4 +181,6 @@ def test_every_safetensors_file_reads_with_the_safetensors_package(trained, tmp_
                 keys = list(f.keys())
                 assert not any(k.startswith("adam.adam.") for k in keys), keys
                 assert "progress.epochs_done" in keys and "progress.epochs_done" in meta["progress"]
-                assert int(f.get_tensor("progress.epochs_done")[0]) == 2
+                # The best epoch's state; its weights are weights.safetensors, not repeated.
+                assert not any(k.startswith("model.") for k in keys), keys
+                assert int(f.get_tensor("progress.epochs_done")[0]) == weights_epoch

@@ -17,8 +17,9 @@ pub enum HierarchyError {
         argument: &'static str,
         message: String,
     },
-    /// A hierarchy file that cannot be read, is not JSON of the expected shape, or whose
-    /// operators disagree on their sizes.
+    /// A hierarchy file that cannot be read, is foreign, newer than this build or damaged
+    /// (checksum), lacks a tensor or has one of the wrong type or length, or whose operators
+    /// disagree on their sizes.
     #[error("{}: not a valid hierarchy file: {message}", path.display())]
     File { path: PathBuf, message: String },
 }

@@ -4,7 +4,8 @@
 //! step, λmax choice, de-pooling mode). **Out:** a [`Hierarchy`]: levels 0..=L, each with its
 //! connectivity, positions and rescaled Laplacian L̃ = 2L/λmax − I, and between consecutive
 //! levels a [`PoolingOp`] (pool m×n, de-pool n×m, all as [`CsrMatrix`]). Saved to and loaded
-//! from one JSON file without recomputation ([`Hierarchy::save`], [`Hierarchy::load`]).
+//! from one file without recomputation ([`Hierarchy::save`], [`Hierarchy::load`]): safetensors
+//! of the workspace's stamped convention, bit-exact; the older JSON files still load.
 //!
 //! ## Poolers ([`Pooler`], the paper's ablation)
 //! - `ours` (alias `mean`): the simplifier with the edge-length term (λ = 0.001); mean pooling

@@ -28,6 +28,22 @@ impl CsrMatrix {
         indices: Vec<u32>,
         values: Vec<f64>,
     ) -> Result<Self, CsrError> {
+        let m = Self {
+            rows,
+            cols,
+            indptr,
+            indices,
+            values,
+        };
+        m.check()?;
+        Ok(m)
+    }
+
+    /// Checks every invariant of [`CsrMatrix::new`]; a deserialised matrix has not been
+    /// through it.
+    pub(crate) fn check(&self) -> Result<(), CsrError> {
+        let (rows, cols) = (self.rows, self.cols);
+        let (indptr, indices, values) = (&self.indptr, &self.indices, &self.values);
         if Some(indptr.len()) != rows.checked_add(1) || indptr[0] != 0 {
             return Err(CsrError(format!(
                 "indptr has {} entries for {rows} rows",
@@ -57,13 +73,7 @@ impl CsrMatrix {
         if let Some(v) = values.iter().find(|v| !v.is_finite()) {
             return Err(CsrError(format!("non-finite value {v}")));
         }
-        Ok(Self {
-            rows,
-            cols,
-            indptr,
-            indices,
-            values,
-        })
+        Ok(())
     }
 
     /// Builds from (row, column, value) triplets; duplicates are summed, explicit zeros kept.

@@ -152,12 +152,13 @@ fn graph_pooling_gradients_match_central_differences() {
 #[test]
 fn graph_hierarchy_saves_and_loads_and_a_broken_one_is_refused() {
     let h = Hierarchy::build(&icosphere(2), &config(Pooler::Graph, 2)).unwrap();
-    let path = temp_path("graph.json");
+    let path = temp_path("graph.hierarchy");
     h.save(&path).unwrap();
     let back = Hierarchy::load(&path).unwrap();
     assert_eq!(back.pooling, h.pooling);
     assert_eq!(back.config.pooler, Pooler::Graph);
-    // A neighbourhood emptied in the file: the loader refuses it.
+    // A neighbourhood emptied in a (version-1, JSON) file: the loader refuses it.
+    write_json_v1(&h, &path);
     let text = std::fs::read_to_string(&path).unwrap();
     let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
     let pool = &mut value["hierarchy"]["pooling"][1]["pool"];

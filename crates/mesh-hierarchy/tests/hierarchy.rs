@@ -1,5 +1,5 @@
 //! Acceptance tests of the hierarchy: operators against dense references built here from the
-//! simplifier's `cluster_of`, composition of two levels, Laplacians, files.
+//! simplifier's `cluster_of`, composition of two levels, Laplacians (files: `file.rs`).
 
 mod common;
 
@@ -247,52 +247,6 @@ fn bad_configuration_is_a_typed_error() {
         Hierarchy::build(&broken, &Default::default()),
         Err(HierarchyError::MeshIo(_))
     ));
-}
-
-#[test]
-fn save_then_load_is_equal_and_corruption_is_a_typed_error() {
-    let h = Hierarchy::build(&torus(12, 8, 1.0, 0.3), &config(Pooler::Max, 2)).unwrap();
-    let path = temp_path("roundtrip.json");
-    h.save(&path).unwrap();
-    let back = Hierarchy::load(&path).unwrap();
-    assert_eq!(back.config, h.config);
-    assert_eq!(back.levels.len(), 3);
-    // serde_json's float_roundtrip makes the file bit-exact: the whole hierarchy compares equal.
-    assert_eq!(back.levels, h.levels);
-    assert_eq!(back.pooling, h.pooling);
-
-    // Truncated file.
-    let text = std::fs::read_to_string(&path).unwrap();
-    let bad = temp_path("truncated.json");
-    std::fs::write(&bad, &text[..text.len() / 2]).unwrap();
-    let err = Hierarchy::load(&bad).unwrap_err();
-    assert!(
-        matches!(&err, HierarchyError::File { path, .. } if *path == bad),
-        "{err}"
-    );
-    // Valid JSON whose level sizes disagree with the operators.
-    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
-    value["hierarchy"]["levels"][1]["vertex_count"] = serde_json::json!(7);
-    std::fs::write(&bad, value.to_string()).unwrap();
-    let err = Hierarchy::load(&bad).unwrap_err();
-    assert!(err.to_string().contains("truncated.json"), "{err}");
-    assert!(matches!(err, HierarchyError::File { .. }));
-    // A sparse matrix with a broken index pointer.
-    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
-    value["hierarchy"]["pooling"][0]["pool"]["indptr"][1] = serde_json::json!(1_000_000);
-    std::fs::write(&bad, value.to_string()).unwrap();
-    assert!(matches!(
-        Hierarchy::load(&bad),
-        Err(HierarchyError::File { .. })
-    ));
-    // Missing file.
-    let missing = temp_path("missing.json");
-    assert!(matches!(
-        Hierarchy::load(&missing),
-        Err(HierarchyError::File { .. })
-    ));
-    let _ = std::fs::remove_file(&path);
-    let _ = std::fs::remove_file(&bad);
 }
 
 #[test]

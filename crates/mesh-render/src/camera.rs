@@ -69,6 +69,18 @@ impl View {
         }
     }
 
+    /// The view of every picture of a mesh set: [`View::Auto`] resolved against the set's rest
+    /// mesh `rest` (its first), not against the meshes one picture happens to show, so that
+    /// every sheet of one set looks from the same side (a set of capsules bent in one plane
+    /// would otherwise be seen lengthwise on one sheet and across on the next). A fixed view
+    /// is itself, as is `Auto` for an empty mesh.
+    pub fn for_set(self, rest: &[[f32; 3]]) -> View {
+        match Bounds::of(&[rest]) {
+            Some(bounds) => self.resolve(&bounds),
+            None => self,
+        }
+    }
+
     /// The lower-case name (`auto`, `front`, `back`, …), as accepted by [`View::from_str`].
     pub fn name(self) -> &'static str {
         match self {
@@ -135,6 +147,31 @@ impl Bounds {
                 max: std::array::from_fn(|k| b.max[k].max(p[k])),
             },
         ))
+    }
+
+    /// The picture size, at most `size` × `size`, that frames the box seen from `view` with
+    /// the same margins on both sides: a long, low shape gets a wide, low picture instead of a
+    /// square one with empty bands above and below (the shorter side is kept to at least a
+    /// quarter of `size`).
+    pub fn fit(&self, view: View, size: u32) -> (u32, u32) {
+        let (right, up, _) = view.resolve(self).axes();
+        let (du, dv) = (self.extent_along(right), self.extent_along(up));
+        let short = |ratio: f32| {
+            let side = (size as f32 * ratio).round() as u32;
+            side.clamp(size.div_ceil(4), size)
+        };
+        match (du > 0.0, dv > 0.0) {
+            (true, true) if du >= dv => (size, short(dv / du)),
+            (true, true) => (short(du / dv), size),
+            _ => (size, size),
+        }
+    }
+
+    /// The box's extent along the unit direction `d`.
+    fn extent_along(&self, d: [f32; 3]) -> f32 {
+        (0..3)
+            .map(|k| (self.max[k] - self.min[k]) * d[k].abs())
+            .sum()
     }
 
     /// The box grown to hold `other` too.
@@ -310,6 +347,57 @@ mod tests {
             max: [1.0, 1.0, 2.0],
         };
         assert_eq!(View::Auto.resolve(&long_z), View::Left);
+    }
+
+    #[test]
+    fn one_set_is_seen_from_one_side_and_pictures_fit_its_aspect() {
+        // A rod along z, round in x and y (a rest capsule), and two of its poses bent in the
+        // y-z plane: framed alone, the poses' box is thinnest in x; the set's view follows
+        // the rest mesh wherever the pictures' boxes would pick another side.
+        let rest = [[-0.1, -0.1, -1.0], [0.1, 0.1, 1.0]];
+        let bent = Bounds {
+            min: [-0.1, -0.1, -0.8],
+            max: [0.1, 0.5, 0.8],
+        };
+        let flat_in_x = Bounds {
+            min: [-0.1, -0.6, -0.2],
+            max: [0.1, 0.6, 0.2],
+        };
+        let view = View::Auto.for_set(&rest);
+        assert_eq!(view, View::Left);
+        assert_eq!(View::Auto.resolve(&bent), View::Left);
+        assert_eq!(View::Auto.resolve(&flat_in_x), View::Left);
+        let flat_in_z = Bounds {
+            min: [-0.6, -0.6, -0.1],
+            max: [0.6, 0.6, 0.1],
+        };
+        assert_eq!(View::Auto.resolve(&flat_in_z), View::Front);
+        assert_eq!(view.resolve(&flat_in_z), View::Left, "a fixed view stays");
+        assert_eq!(View::Top.for_set(&rest), View::Top);
+        assert_eq!(View::Auto.for_set(&[]), View::Auto);
+
+        // Seen from the left (z to the right, y up): 1.6 wide, 0.6 high.
+        assert_eq!(bent.fit(View::Left, 160), (160, 60));
+        // From the front the same box is 0.2 wide and 0.6 high: a tall picture.
+        assert_eq!(bent.fit(View::Front, 150), (50, 150));
+        // A needle keeps a quarter of the size; a point, a square.
+        let needle = Bounds {
+            min: [0.0, 0.0, -1.0],
+            max: [0.0, 0.001, 1.0],
+        };
+        assert_eq!(needle.fit(View::Left, 160), (160, 40));
+        let point = Bounds {
+            min: [1.0; 3],
+            max: [1.0; 3],
+        };
+        assert_eq!(point.fit(View::Front, 64), (64, 64));
+        // The fitted picture frames the box with the margin on both axes.
+        let (w, h) = bent.fit(View::Left, 160);
+        let p = Projection::new(View::Left, &bent, w, h);
+        let top = p.project([0.0, 0.5, 0.0])[1];
+        let left = p.project([0.0, 0.0, -0.8])[0];
+        assert!((top - MARGIN * h as f32).abs() < 0.5, "{top}");
+        assert!((left - MARGIN * w as f32).abs() < 0.5, "{left}");
     }
 
     #[test]

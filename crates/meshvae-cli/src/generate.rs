@@ -148,9 +148,11 @@ pub fn tiles(
 ) -> Result<Vec<Tile>, CliError> {
     let frames: Vec<&[[f32; 3]]> = meshes.iter().map(|(p, _)| *p).collect();
     let frame = Bounds::of(&frames);
+    // No empty bands above and below long, low shapes; the full width, for the captions.
+    let height = frame.map_or(TILE, |f| f.fit(view, TILE).1);
     let options = RenderOptions {
         width: TILE,
-        height: TILE,
+        height,
         view,
         frame,
         ..RenderOptions::default()
@@ -198,10 +200,11 @@ pub fn run(args: &GenerateArgs) -> Result<(), CliError> {
             pairs.push((&mesh.positions, caption));
             pairs.push((
                 set.frame(nb.index),
-                format!("{} (d {:.2e})", nb.name, nb.distance),
+                // The terminal's unit: a fraction of the template's diagonal.
+                format!("{} (d {:.2e} of diag.)", nb.name, nb.distance_rel),
             ));
         }
-        let tiles = tiles(&pairs, set.faces(), args.view)?;
+        let tiles = tiles(&pairs, set.faces(), args.view.for_set(set.frame(0)))?;
         // Two pairs per row (four columns), or one when there is a single sample.
         Some(mesh_render::sheet(
             &tiles,

@@ -80,7 +80,8 @@ pub fn run(args: &InterpolateArgs) -> Result<(), CliError> {
             (m.positions.as_slice(), caption)
         })
         .collect();
-    let strip = mesh_render::sheet(&tiles(&captioned, set.faces(), args.view)?, args.steps)?;
+    let view = args.view.for_set(set.frame(0));
+    let strip = mesh_render::sheet(&tiles(&captioned, set.faces(), view)?, args.steps)?;
 
     create_out(&args.out)?;
     for (mesh, name) in meshes.iter().zip(&names) {

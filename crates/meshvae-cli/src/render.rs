@@ -212,12 +212,20 @@ pub fn run(args: &RenderArgs) -> Result<(), CliError> {
         DEFAULT_TILE
     });
     let frames: Vec<&[[f32; 3]]> = set.frames().collect();
+    // The view of the set's other pictures (its rest mesh decides).
+    let view = args.view.for_set(set.frame(0));
+    // One frame for all meshes, so that sizes and motions compare.
+    let frame = Bounds::of(&frames);
+    // A single picture keeps the size asked for; tiles take the frame's shape.
+    let (width, height) = match frame {
+        Some(f) if !input.single => f.fit(view, size),
+        _ => (size, size),
+    };
     let options = RenderOptions {
-        width: size,
-        height: size,
-        view: args.view,
-        // One frame for all meshes, so that sizes and motions compare.
-        frame: Bounds::of(&frames),
+        width,
+        height,
+        view,
+        frame,
         ..RenderOptions::default()
     };
     let render_one = |i: usize| -> Result<Image, CliError> {

@@ -125,16 +125,22 @@ pub struct TrainArgs {
     /// outliers; 0 fits it between min and max, as the authors' code [default: 0.001].
     #[arg(long)]
     normalize_quantile: Option<f64>,
-    /// Continue the model in --out from its last checkpoint.
+    /// Continue the model in --out from its checkpoint (the best epoch's state: the epochs
+    /// after it are trained again, to the same weights).
     #[arg(long, conflicts_with = "force")]
     resume: bool,
     /// Replace a model already in --out.
     #[arg(long)]
     force: bool,
-    /// Write the checkpoint at most this often (and after the last epoch); a kill loses at
-    /// most this much training.
+    /// Write the best weights and their checkpoint at most this often (and after the last
+    /// epoch); a kill loses the epochs since the best one written.
     #[arg(long, default_value_t = 60.0)]
     checkpoint_seconds: f64,
+    /// Also keep the weights with the lowest TEST loss (weights-selected-on-test.safetensors,
+    /// as large as the model) for `meshvae eval --select-on-test`, the authors' protocol;
+    /// otherwise run.json records only their epoch and loss.
+    #[arg(long)]
+    keep_selected_on_test: bool,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
@@ -310,6 +316,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         force: args.force,
         progress: !args.quiet,
         checkpoint_seconds: args.checkpoint_seconds,
+        keep_selected_on_test: args.keep_selected_on_test,
         device: Device::Cpu,
         engine: !args.no_engine,
         ..TrainOptions::default()
@@ -403,7 +410,8 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
     }
     // Drawn before anything is written, so a failure leaves no partial output.
     let sheet = if args.sheet {
-        Some(error_sheet(&set, &ids, &meshes, args.view)?)
+        let view = args.view.for_set(set.frame(0));
+        Some(error_sheet(&set, &ids, &meshes, view)?)
     } else {
         None
     };
@@ -471,11 +479,14 @@ fn error_sheet(
         .map_or(0.0, |&i| mesh_io::bbox_diagonal(set.frame(i)));
     let mut frames: Vec<&[[f32; 3]]> = ids.iter().map(|&i| set.frame(i)).collect();
     frames.extend(recon.iter().map(|r| r.as_slice()));
+    let frame = mesh_render::Bounds::of(&frames);
+    // No empty bands above and below long, low shapes; the full width, for the captions.
+    let height = frame.map_or(256, |f| f.fit(view, 256).1);
     let options = mesh_render::RenderOptions {
         width: 256,
-        height: 256,
+        height,
         view,
-        frame: mesh_render::Bounds::of(&frames),
+        frame,
         ..mesh_render::RenderOptions::default()
     };
     let mut tiles = Vec::with_capacity(2 * ids.len());

@@ -98,8 +98,13 @@ fn a_folder_gives_a_captioned_sheet_and_errors_add_a_colour_bar() {
     ]);
     assert_ok(&run);
     let sheet = Image::load_png(&out).unwrap();
-    let cell_h = 64 + mesh_render::caption_height(64);
-    assert_eq!((sheet.width, sheet.height), (4 * 64, 2 * cell_h));
+    // Tiles shaped like the set's shared frame, seen from the side its rest mesh picks.
+    let frames: Vec<&[[f32; 3]]> = set.frames().collect();
+    let view = mesh_render::View::Auto.for_set(set.frame(0));
+    let (tile_w, tile_h) = mesh_render::Bounds::of(&frames).unwrap().fit(view, 64);
+    assert!(tile_w <= 64 && tile_h <= 64 && tile_w.max(tile_h) == 64);
+    let cell_h = tile_h + mesh_render::caption_height(tile_w);
+    assert_eq!((sheet.width, sheet.height), (4 * tile_w, 2 * cell_h));
 
     // The same set moved by 0.1 along x: every vertex is 0.1 from its ground truth.
     let moved: Vec<TriMesh> = (0..set.len())
@@ -135,7 +140,7 @@ fn a_folder_gives_a_captioned_sheet_and_errors_add_a_colour_bar() {
     assert!(String::from_utf8_lossy(&run.stdout).contains("largest error 0.100"));
     let image = Image::load_png(&out).unwrap();
     assert!(
-        image.height > 2 * cell_h + 30 && image.width >= 3 * 64,
+        image.height > 2 * cell_h + 30 && image.width >= 3 * tile_w,
         "a colour bar heads the sheet: {}x{}",
         image.width,
         image.height

@@ -27,7 +27,9 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         args.extend_from_slice(extra);
         meshvae(&args)
     };
-    let out = train(&[]);
+    // Keeps the weights chosen on the test loss too (`eval --select-on-test` below); resuming
+    // goes on keeping them.
+    let out = train(&["--keep-selected-on-test"]);
     assert!(out.status.success());
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -239,12 +241,16 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     assert!(out.contains("and sheet.png"), "{out}");
     let bytes = std::fs::read(rec_sheet.join("sheet.png")).unwrap();
     let image = mesh_render::Image::decode_png(&bytes).unwrap();
+    let caption = mesh_render::caption_height(256);
     assert!(
-        image.width >= 4 * 256 && image.height > 2 * 256 + 40,
+        image.width >= 4 * 256 && image.height > 2 * caption + 40,
         "{}x{}",
         image.width,
         image.height
     );
+    // Seen from the left the capsules lie: tiles lower than square, without empty bands (two
+    // rows of square tiles alone would be taller).
+    assert!(image.height < 2 * (256 + caption), "{}", image.height);
     // The bar heads the sheet: its hottest colour (the last column but the frame) sits in the
     // top band.
     let hot = mesh_render::error_color(1.0);

@@ -292,6 +292,18 @@ impl Adam {
 
     /// Copies of the whole state: `adam.m.<var>`, `adam.v.<var>` and `adam.step` (i64 `[1]`).
     pub fn state_tensors(&self) -> Result<Vec<(String, Tensor)>> {
+        self.state(true)
+    }
+
+    /// [`Self::state_tensors`] without copying the moments: the tensors change with the next
+    /// step, so they are only for writing out at once (a large model's moments are not
+    /// duplicated in memory to be saved).
+    pub fn state_shared(&self) -> Result<Vec<(String, Tensor)>> {
+        self.state(false)
+    }
+
+    fn state(&self, copy: bool) -> Result<Vec<(String, Tensor)>> {
+        let take = |t: &Tensor| if copy { t.copy() } else { Ok(t.clone()) };
         let device = self
             .slots
             .first()
@@ -305,8 +317,8 @@ impl Adam {
             ));
         }
         for s in &self.slots {
-            out.push((format!("adam.m.{}", s.name), s.m.as_tensor().copy()?));
-            out.push((format!("adam.v.{}", s.name), s.v.as_tensor().copy()?));
+            out.push((format!("adam.m.{}", s.name), take(s.m.as_tensor())?));
+            out.push((format!("adam.v.{}", s.name), take(s.v.as_tensor())?));
         }
         Ok(out)
     }

@@ -1,16 +1,23 @@
-//! [`Checkpoint`]: the whole training state after an epoch, in one safetensors file, so that an
-//! interrupted run resumes exactly where the last finished epoch left it. Written atomically (a
-//! kill at any moment leaves either the previous checkpoint or the new one) with the
-//! `mesh_io::stamped` convention (`format` = `meshvae-checkpoint`, `version` = `2`, `writer`,
-//! `checksum`, verified on loading).
+//! [`Checkpoint`]: what an interrupted run resumes from, beside the weights it continues from.
 //!
-//! Tensors: the model's variables as `model.<name>` (the names of the weights file), Adam's
-//! state as `adam.step`, `adam.restarted_at`, `adam.m.<name>` and `adam.v.<name>`, and the
-//! progress counters as `progress.*`, each described by the metadata entry `progress` (see
-//! [`PROGRESS_DOC`]). Version-1 checkpoints (`adam.adam.*` and three-number `meta.*` tensors)
-//! still load.
+//! A checkpoint holds the training state of the best epoch so far, the epoch whose weights are
+//! `weights.safetensors`: Adam's moments and step, the random stream, the schedule and the
+//! counters. It does not hold the weights again (the folder would carry two copies, one of them
+//! of a later, worse epoch): resuming loads `weights.safetensors`, checks that its `epoch`
+//! metadata is the checkpoint's, and trains again the epochs after it. Every random draw comes
+//! from the saved stream, so those epochs come out bit for bit as they did, and the resumed run
+//! ends as an uninterrupted one would. Written atomically with the `mesh_io::stamped`
+//! convention (`format` = `meshvae-checkpoint`, `version` = `3`, `writer`, `checksum`, verified
+//! on loading).
+//!
+//! Tensors: Adam's state as `adam.step`, `adam.restarted_at`, `adam.m.<name>` and
+//! `adam.v.<name>`, and the progress counters as `progress.*`, each described by the metadata
+//! entry `progress` (see [`PROGRESS_DOC`]). Versions 1 and 2 held the state of the last epoch
+//! and its weights as `model.<name>` (version 1: `adam.adam.*` and three-number `meta.*`
+//! tensors); both still load.
 
 use crate::adam::Adam;
+use crate::config::ModelConfig;
 use crate::error::{Result, VaeError};
 use crate::model::{MeshVae, stamped_error, tensor_entry};
 use crate::schedule::ScheduleState;
@@ -22,13 +29,14 @@ use std::path::Path;
 /// What a checkpoint's metadata says it is.
 pub const CHECKPOINT_STAMP: Stamp = Stamp {
     format: "meshvae-checkpoint",
-    version: 2,
+    version: 3,
 };
 
 /// The `progress` metadata entry: what each counter tensor holds.
-pub const PROGRESS_DOC: &str = "progress.epochs_done: epochs finished; progress.best_epoch: the \
-    epoch whose weights weights.safetensors holds (lowest validation loss, or training loss \
-    without validation meshes; 0 before any) and progress.best_loss its loss (inf before any); \
+pub const PROGRESS_DOC: &str = "progress.epochs_done: the epoch this state is of, whose weights \
+    are weights.safetensors (its metadata entry `epoch` says the same); progress.best_epoch: the \
+    same epoch, the best so far (lowest validation loss, or training loss without validation \
+    meshes) and progress.best_loss its loss; \
     progress.best_test_epoch and progress.best_test_loss: the same on the test loss; \
     progress.rng: the training random stream's xoshiro256 state after the last epoch, four \
     u64 words as eight u32 (high word first); progress.schedule: the learning-rate schedule's \
@@ -59,14 +67,17 @@ pub struct Progress {
 pub struct Checkpoint;
 
 impl Checkpoint {
-    /// Writes the state of `model`, `adam` and `progress` to `path` atomically.
-    pub fn save(path: &Path, model: &MeshVae, adam: &Adam, progress: &Progress) -> Result<()> {
-        let mut map: BTreeMap<String, Tensor> = BTreeMap::new();
-        for (name, var) in model.trainable_vars().into_iter().chain(model.state_vars()) {
-            map.insert(format!("model.{name}"), var.as_tensor().clone());
-        }
+    /// Writes `adam` (Adam's state, [`Adam::state_tensors`]) and `progress` to `path`
+    /// atomically: the state of epoch `progress.epoch`, whose weights (of a model configured
+    /// as `config`) must already be in the folder's `weights.safetensors`.
+    pub fn save(
+        path: &Path,
+        config: &ModelConfig,
+        adam: Vec<(String, Tensor)>,
+        progress: &Progress,
+    ) -> Result<()> {
         // Adam's own names start with `adam.`.
-        map.extend(adam.state_tensors()?);
+        let mut map: BTreeMap<String, Tensor> = adam.into_iter().collect();
         let cpu = Device::Cpu;
         // safetensors has no u64 in candle: the random state as eight u32 words.
         let words: Vec<u32> = progress
@@ -93,21 +104,39 @@ impl Checkpoint {
             Tensor::new(progress.schedule.to_vec().as_slice(), &cpu)?,
         );
         map.insert("progress.seconds".into(), real(progress.seconds)?);
-        let config = serde_json::to_string(model.config())
+        let config = serde_json::to_string(config)
             .map_err(|e| VaeError::model(path, format!("config to JSON: {e}")))?;
         let metadata = BTreeMap::from([
             ("config".to_string(), config),
             ("progress".to_string(), PROGRESS_DOC.to_string()),
+            (
+                "weights".to_string(),
+                format!(
+                    "weights.safetensors of epoch {} (not repeated here)",
+                    progress.epoch
+                ),
+            ),
         ]);
         let entries = map.iter().map(|(n, t)| tensor_entry(n, t)).collect();
         write_stamped(path, CHECKPOINT_STAMP, metadata, entries)?;
         Ok(())
     }
 
-    /// Restores `model` and `adam` from `path` and returns the progress.
-    pub fn load(path: &Path, model: &mut MeshVae, adam: &mut Adam) -> Result<Progress> {
+    /// Restores `model` (from `weights`, or from the checkpoint itself for versions 1 and 2)
+    /// and `adam` from `path` and returns the progress.
+    ///
+    /// Errors: a damaged or foreign file, or weights of another epoch than the checkpoint's (a
+    /// run killed between writing the one and the other).
+    pub fn load(
+        path: &Path,
+        weights: &Path,
+        model: &mut MeshVae,
+        adam: &mut Adam,
+    ) -> Result<Progress> {
         let (version, map) = read(path, model)?;
-        set_model(path, &map, model)?;
+        if version < 3 {
+            set_model(path, &map, model)?;
+        }
         // Version 1 prefixed Adam's own `adam.` names once more.
         let adam_state: HashMap<String, Tensor> = map
             .iter()
@@ -190,8 +219,23 @@ impl Checkpoint {
             Some(t) => t.to_dtype(DType::F64)?.to_vec1::<f64>()?.first().copied(),
             None => None,
         };
+        let epoch = epoch.max(0) as usize;
+        if version >= 3 {
+            let of_weights = model.load_epoch(weights)?;
+            if of_weights != Some(epoch) {
+                let found = of_weights.map_or("no epoch".into(), |e| format!("epoch {e}"));
+                return Err(VaeError::model(
+                    path,
+                    format!(
+                        "continues from the weights of epoch {epoch}, but {} holds {found} (the \
+                         run was killed between writing the two): start again with --force",
+                        weights.display()
+                    ),
+                ));
+            }
+        }
         Ok(Progress {
-            epoch: epoch.max(0) as usize,
+            epoch,
             rng,
             best_loss,
             best_epoch: best_epoch.max(0) as usize,
@@ -202,9 +246,38 @@ impl Checkpoint {
         })
     }
 
-    /// Restores only the model's tensors (to use a model whose best weights were not saved).
+    /// The epoch whose state the checkpoint at `path` holds (`None` for versions 1 and 2,
+    /// whose weights are inside).
+    pub fn epoch(path: &Path) -> Result<Option<usize>> {
+        let bytes = std::fs::read(path).map_err(|e| VaeError::io(path, e))?;
+        if format_of(&bytes).is_none() {
+            return Ok(None);
+        }
+        let file = read_stamped(&bytes, path, CHECKPOINT_STAMP).map_err(stamped_error)?;
+        if file.version < 3 {
+            return Ok(None);
+        }
+        let view = file
+            .tensors
+            .tensor("progress.epochs_done")
+            .map_err(|e| VaeError::model(path, format!("no epoch: {e}")))?;
+        let data: [u8; 8] = view
+            .data()
+            .try_into()
+            .map_err(|_| VaeError::model(path, "malformed progress.epochs_done"))?;
+        Ok(usize::try_from(i64::from_le_bytes(data)).ok())
+    }
+
+    /// Restores only the model's tensors from a version-1 or -2 checkpoint (to use an old model
+    /// whose best weights were not saved); a version-3 checkpoint holds none.
     pub fn load_model_only(path: &Path, model: &mut MeshVae) -> Result<()> {
-        let (_, map) = read(path, model)?;
+        let (version, map) = read(path, model)?;
+        if version >= 3 {
+            return Err(VaeError::model(
+                path,
+                "holds no weights (they are weights.safetensors, which is missing)",
+            ));
+        }
         set_model(path, &map, model)
     }
 }

@@ -3,18 +3,24 @@
 //! ```text
 //! MODEL/
 //!   config.json          ModelSpec: model, training and feature settings, set description
-//!   hierarchy.json       mesh levels, Laplacians, pooling operators (mesh-hierarchy's format)
+//!   hierarchy.safetensors  mesh levels, Laplacians, pooling operators (mesh-hierarchy's
+//!                        format; models trained before it have hierarchy.json)
 //!   normalization.json   feature ranges fitted on the training split
 //!   split.json           training and test indices (and names)
 //!   template.obj         the rest mesh features are relative to
-//!   weights.safetensors  the best weights (lowest validation loss)
-//!   checkpoint.safetensors  the last epoch: weights, optimiser, random state, schedule
+//!   weights.safetensors  the best weights (lowest validation loss); metadata `epoch` says which
+//!   checkpoint.safetensors  the rest of that epoch's training state: optimiser moments, random
+//!                        state, schedule (a resumed run trains the later epochs again)
 //!   log.jsonl            one line of losses per epoch (with the step count and learning rate)
-//!   run.json             why training stopped: converged, budget or interrupted (RunStatus)
+//!   run.json             why training stopped: converged, budget or interrupted (RunStatus),
+//!                        and the epoch with the lowest test loss
 //!   loss.png             the loss curves (written by `meshvae train`)
+//!   weights-selected-on-test.safetensors  only with `--keep-selected-on-test`
 //! ```
 //!
-//! Every file is written atomically (temporary file, then rename).
+//! One copy of the weights: the checkpoint does not repeat them (horse-gallop's folder went
+//! from 191 MB to about 120 MB). Every file is written atomically (temporary file, then
+//! rename).
 
 use crate::config::ModelConfig;
 use crate::error::{Result, VaeError};
@@ -269,7 +275,19 @@ impl ModelFolder {
     pub fn config(&self) -> PathBuf {
         self.dir.join("config.json")
     }
+    /// `hierarchy.safetensors`, or the `hierarchy.json` of a model trained before it (when
+    /// that is the one present).
     pub fn hierarchy(&self) -> PathBuf {
+        let binary = self.dir.join("hierarchy.safetensors");
+        let json = self.legacy_hierarchy();
+        if !binary.is_file() && json.is_file() {
+            json
+        } else {
+            binary
+        }
+    }
+    /// Where models trained before the binary hierarchy kept it.
+    pub fn legacy_hierarchy(&self) -> PathBuf {
         self.dir.join("hierarchy.json")
     }
     pub fn normalization(&self) -> PathBuf {
@@ -283,6 +301,11 @@ impl ModelFolder {
     }
     pub fn weights(&self) -> PathBuf {
         self.dir.join("weights.safetensors")
+    }
+    /// Best weights written before their checkpoint, put in place after it (a kill in between
+    /// leaves them here for the next start to settle).
+    pub fn pending_weights(&self) -> PathBuf {
+        self.dir.join("weights.pending.safetensors")
     }
     /// The weights with the lowest TEST loss, kept only to compare with the authors' protocol
     /// (`meshvae eval --select-on-test`).
@@ -485,14 +508,35 @@ impl TrainedModel {
         let mut selected_on = split_file.selected_on;
         if select_on_test && selected_on != Selection::Test {
             let on_test = folder.weights_selected_on_test();
+            let status = crate::train::read_status(&folder)?;
+            let chosen_epoch = status.as_ref().and_then(|s| s.best_test_epoch);
             if !on_test.is_file() {
+                let chosen = (status.as_ref())
+                    .and_then(|s| s.best_test_epoch.zip(s.best_test_loss))
+                    .map_or(String::new(), |(epoch, loss)| {
+                        format!(" (the test loss chose epoch {epoch}, loss {loss:.4})")
+                    });
                 return Err(VaeError::model(
                     dir,
-                    "no weights selected on the test meshes (the model has no test meshes, or \
-                     predates --select-on-test)",
+                    format!(
+                        "no weights selected on the test meshes{chosen}: they are kept only when \
+                         training is asked to (meshvae train --keep-selected-on-test), and \
+                         exist only for a model with test meshes"
+                    ),
                 ));
             }
-            model.load(&on_test)?;
+            let epoch = model.load_epoch(&on_test)?;
+            if let (Some(held), Some(chosen)) = (epoch, chosen_epoch)
+                && held != chosen
+            {
+                return Err(VaeError::model(
+                    &on_test,
+                    format!(
+                        "holds the weights of epoch {held}, but the test loss chose epoch \
+                         {chosen} (run.json): stale"
+                    ),
+                ));
+            }
             selected_on = Selection::Test;
         } else if weights.is_file() {
             model.load(&weights)?;

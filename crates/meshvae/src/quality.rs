@@ -149,6 +149,8 @@ mod tests {
             rollbacks: 0,
             seconds: 3.0,
             path: "engine".into(),
+            best_test_epoch: None,
+            best_test_loss: None,
         };
         let warning = improving_warning(&status).unwrap();
         assert_eq!(warning, QualityWarning::StoppedWhileImproving { steps: 30 });

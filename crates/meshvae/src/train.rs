@@ -39,14 +39,16 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
+mod best;
 mod epoch_log;
 mod rollback;
 mod setup;
 mod status;
 
+use best::{BestState, keep_weights, write_current};
 pub use epoch_log::read_log;
 use epoch_log::{append_log, truncate_log};
 use rollback::Recovery;
@@ -90,6 +92,10 @@ pub struct TrainOptions {
     /// a copy of a large model (~200 MB on a 42k-vertex mesh) nor the engine's buffers stay in
     /// memory beside the validation and checkpoint work.
     pub best_in_memory_params: usize,
+    /// Keep the weights with the lowest test loss in `weights-selected-on-test.safetensors`
+    /// (for `meshvae eval --select-on-test`, the authors' protocol); otherwise only their epoch
+    /// and loss are recorded, in `run.json`.
+    pub keep_selected_on_test: bool,
     /// Measure the test loss (only logged, never used for a choice of the run) after an epoch
     /// once this many optimizer steps have passed since it was last measured, and after the
     /// last epoch; 1 = every epoch. On a small set (one step an epoch) the test pass costs as
@@ -117,6 +123,7 @@ impl Default for TrainOptions {
             progress: false,
             checkpoint_seconds: 60.0,
             best_in_memory_params: 16 << 20,
+            keep_selected_on_test: false,
             test_every_steps: 10,
             device: Device::Cpu,
             engine: true,
@@ -246,8 +253,17 @@ pub fn train(
         schedule: ScheduleState::default(),
         seconds: 0.0,
     };
+    // How the run ended, if it did: a checkpoint holds the best epoch's state, not the last's.
+    let ended = match options.resume {
+        true => read_status(&folder)?.filter(|s| s.stop_reason != StopReason::Interrupted),
+        false => None,
+    };
+    if options.resume {
+        best::settle_pending(&folder, &mut model)?;
+    }
     if options.resume && folder.checkpoint().is_file() {
-        progress = Checkpoint::load(&folder.checkpoint(), &mut model, &mut adam)?;
+        let (checkpoint, weights) = (folder.checkpoint(), folder.weights());
+        progress = Checkpoint::load(&checkpoint, &weights, &mut model, &mut adam)?;
     } else if options.resume {
         // Interrupted before its first checkpoint: said, so that a restart is not mistaken for
         // a continuation.
@@ -257,14 +273,35 @@ pub fn train(
             folder.dir.display()
         );
     }
-    truncate_log(&folder.log(), progress.epoch)?;
-    let mut rng = Rng::from_state(progress.rng)?;
-
     let batch = spec.train.batch;
     let train_ids = &data.split.train;
     let steps_per_epoch = train_ids.len().div_ceil(batch);
     let epochs = spec.train.epoch_budget(steps_per_epoch);
     let schedule: Schedule = spec.train.schedule;
+    let selection = data.split.selection();
+    if let Some(ended) = ended
+        && (ended.stop_reason == StopReason::Converged || ended.epochs >= epochs)
+    {
+        // Nothing left to train (a converged run resumed with a larger budget has nothing left
+        // to learn either): its record stands as it is.
+        let log = read_log(&folder.log())?;
+        return Ok(TrainSummary {
+            epochs_run: 0,
+            epochs_total: epochs,
+            stop_reason: ended.stop_reason,
+            steps: ended.steps,
+            still_improving: ended.still_improving,
+            lr: ended.lr,
+            seconds_total: ended.seconds,
+            last: log.last().cloned(),
+            best_epoch: ended.best_epoch,
+            best_loss: progress.best_loss,
+            selected_on: selection,
+            seconds: start.elapsed().as_secs_f64(),
+        });
+    }
+    truncate_log(&folder.log(), progress.epoch)?;
+    let mut rng = Rng::from_state(progress.rng)?;
     let base_lr = spec.train.lr;
     // Which path trains, said in `run.json` (the engine declines some models; see
     // `Engine::unsupported`).
@@ -291,8 +328,14 @@ pub fn train(
         rollbacks: progress.schedule.rollbacks,
         seconds: progress.seconds,
         path: if engine_used { "engine" } else { "candle" }.into(),
+        best_test_epoch: (progress.best_test_epoch > 0).then_some(progress.best_test_epoch),
+        best_test_loss: progress
+            .best_test_loss
+            .is_finite()
+            .then_some(progress.best_test_loss),
     };
-    // A converged run resumed (say with a larger budget) has nothing left to learn.
+    // A converged run resumed from a checkpoint of its last epoch (versions 1 and 2; newer ones
+    // are told by `run.json` above) has nothing left to learn.
     let already_converged =
         schedule.stops_early() && progress.schedule.since_best >= schedule.patience;
     if !already_converged && progress.epoch < epochs {
@@ -304,10 +347,12 @@ pub fn train(
     let bar = progress_bar(options.progress, epochs, progress.epoch, steps_per_epoch);
     let mut last = None;
     let mut epochs_run = 0;
-    let mut best = None;
+    let mut best: Option<BestState> = None;
     let mut best_on_test = None;
-    let selection = data.split.selection();
     let keep_in_memory = model.param_count().with_biases <= options.best_in_memory_params;
+    // A resumed run goes on keeping them if it kept them before (or its file would go stale).
+    let keep_selected_on_test = options.keep_selected_on_test
+        || (options.resume && folder.weights_selected_on_test().is_file());
     let mut kept_engine = None;
     let mut last_write = Instant::now();
     let mut stop = if already_converged {
@@ -440,7 +485,7 @@ pub fn train(
                 Some(rollback::tensors_of(&fresh))
             };
             trained_since_rollback = false;
-            let best = best.as_ref();
+            let best = best.as_ref().map(|b| &b.weights);
             let recovery = Recovery {
                 what,
                 best,
@@ -498,36 +543,43 @@ pub fn train(
             step: adam.step_count(),
             lr: Some(adam.config().lr),
         };
-        // A kill before the next checkpoint replays the epochs since and rewrites the same
-        // weights, so writing best weights early is safe.
         debug_assert_eq!(score, record.score(selection));
-        if score < progress.best_loss {
-            best = keep_best(&model, keep_in_memory, &folder.weights())?;
+        let improved = score < progress.best_loss;
+        if improved {
             progress.best_loss = score;
             progress.best_epoch = epoch;
         }
-        if let Some(t) = test_loss
-            && t < progress.best_test_loss
-        {
-            let path = folder.weights_selected_on_test();
-            best_on_test = keep_best(&model, keep_in_memory, &path)?;
+        let improved_on_test = test_loss.filter(|&t| t < progress.best_test_loss);
+        if let Some(t) = improved_on_test {
             progress.best_test_loss = t;
             progress.best_test_epoch = epoch;
         }
         progress.epoch = epoch;
         progress.rng = rng.state();
         progress.seconds = prior_seconds + start.elapsed().as_secs_f64();
+        // Before any checkpoint of this epoch: a resumed run truncates the log to its epoch.
         append_log(&folder.log(), &record)?;
+        // A kill before these reach the folder replays the epochs since the last write and
+        // finds the same bests again, so writing them early is safe.
+        if improved_on_test.is_some() && keep_selected_on_test {
+            let path = folder.weights_selected_on_test();
+            best_on_test = keep_weights(&model, keep_in_memory, &path, epoch)?;
+        }
+        if improved {
+            if keep_in_memory {
+                best = Some(BestState::capture(&model, &adam, &progress)?);
+            } else {
+                write_current(&model, &adam, &progress, &folder)?;
+            }
+        }
         if finished || last_write.elapsed().as_secs_f64() >= options.checkpoint_seconds {
-            // The best weights first: a kill in between leaves a checkpoint that replays the
-            // epochs since the previous one and rewrites them identically.
-            if let Some(best) = best.take() {
-                model.save_snapshot(&best, &folder.weights())?;
+            if let Some(weights) = best_on_test.take() {
+                let (path, at) = (folder.weights_selected_on_test(), progress.best_test_epoch);
+                model.save_snapshot(&weights, &path, Some(at))?;
             }
-            if let Some(best) = best_on_test.take() {
-                model.save_snapshot(&best, &folder.weights_selected_on_test())?;
+            if let Some(best) = best.as_mut() {
+                best.write(&model, &folder)?;
             }
-            Checkpoint::save(&folder.checkpoint(), &model, &adam, &progress)?;
             let reason = if finished {
                 stop
             } else {
@@ -578,21 +630,6 @@ pub fn train(
         selected_on: selection,
         seconds: start.elapsed().as_secs_f64(),
     })
-}
-
-/// A copy of the model's tensors if small enough to keep in memory until the next checkpoint;
-/// otherwise the weights are written to `path` now (so that a copy of a large model, ~200 MB on
-/// a 42k-vertex mesh, does not stay in memory through the next epochs).
-fn keep_best(
-    model: &MeshVae,
-    in_memory: bool,
-    path: &Path,
-) -> Result<Option<std::collections::BTreeMap<String, candle_core::Tensor>>> {
-    if in_memory {
-        return Ok(Some(model.tensors()?));
-    }
-    model.save(path)?;
-    Ok(None)
 }
 
 /// w_rec · mean over `ids` of the squared error with z = μ (inference mode), or `None`.

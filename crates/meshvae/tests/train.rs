@@ -68,6 +68,116 @@ fn resumed_training_ends_with_the_weights_of_an_uninterrupted_run() {
     resumption_is_exact(&0, "disk");
 }
 
+/// The checkpoint holds the best epoch's state, not the last one's (the folder keeps one copy
+/// of the weights): a run killed after its best epoch resumes from that epoch and trains the
+/// later ones again, ending bit for bit as the uninterrupted run.
+#[test]
+fn a_run_killed_after_its_best_epoch_replays_the_later_epochs_to_the_same_end() {
+    for (in_memory, tag) in [(16usize << 20, "mem"), (0, "disk")] {
+        let options = |resume: bool, checkpoint_seconds: f64| TrainOptions {
+            best_in_memory_params: in_memory,
+            checkpoint_seconds,
+            test_every_steps: 1,
+            ..options(resume, false)
+        };
+        let set = small_set(3, 8);
+        let epochs = 12;
+        let req = |out: &Path| {
+            let mut r = request(&set, out, epochs);
+            // A rate large enough that the validation loss does not fall every epoch.
+            r.train.lr = 0.03;
+            r.train.schedule = Schedule::constant();
+            r
+        };
+        let whole = scratch(&format!("replay-whole-{tag}"));
+        let whole_run = train(&req(&whole), &options(false, 60.0), |_| {}).unwrap();
+        let best = whole_run.best_epoch;
+        assert!(
+            best < epochs,
+            "the best epoch is the last: nothing to replay"
+        );
+
+        // Every best written as it comes, then "killed" after the last epoch was logged but
+        // before the run recorded its end.
+        let parts = scratch(&format!("replay-parts-{tag}"));
+        train(&req(&parts), &options(false, 0.0), |_| {}).unwrap();
+        let folder = ModelFolder::new(&parts);
+        let status = std::fs::read_to_string(folder.status()).unwrap();
+        std::fs::write(
+            folder.status(),
+            status.replace("\"budget\"", "\"interrupted\""),
+        )
+        .unwrap();
+        let meta = mesh_io::stamped::format_of(&std::fs::read(folder.weights()).unwrap());
+        assert_eq!(meta.as_deref(), Some("meshvae-weights"));
+        // Killed while writing the pair: after the checkpoint, the new weights are still
+        // pending (settled on resumption); before it, a half-written pending file is dropped.
+        let pending = folder.pending_weights();
+        if tag == "mem" {
+            std::fs::rename(folder.weights(), &pending).unwrap();
+            std::fs::write(folder.weights(), b"the previous best, say").unwrap();
+        } else {
+            std::fs::write(&pending, b"half a file").unwrap();
+        }
+        let resumed = train(&req(&parts), &options(true, 60.0), |_| {}).unwrap();
+        assert_eq!(resumed.epochs_run, epochs - best, "{tag}");
+        assert!(!pending.exists());
+
+        let fw = ModelFolder::new(&whole);
+        let read = |p: PathBuf| std::fs::read(p).unwrap();
+        assert!(
+            read(fw.weights()) == read(folder.weights()),
+            "{tag}: weights"
+        );
+        let tensors = |f: &ModelFolder| {
+            let mut map: Vec<(String, Vec<u64>)> =
+                candle_core::safetensors::load(f.checkpoint(), &Device::Cpu)
+                    .unwrap()
+                    .into_iter()
+                    .filter(|(k, _)| k != "progress.seconds")
+                    .map(|(k, t)| {
+                        let t = t.flatten_all().unwrap();
+                        let t = t.to_dtype(candle_core::DType::F64).unwrap();
+                        let values = t.to_vec1::<f64>().unwrap();
+                        (k, values.iter().map(|x| x.to_bits()).collect())
+                    })
+                    .collect();
+            map.sort();
+            map
+        };
+        let (a, b) = (tensors(&fw), tensors(&folder));
+        // No weights in the checkpoint: they are weights.safetensors.
+        assert!(a.iter().all(|(k, _)| !k.starts_with("model.")));
+        assert!(a.iter().any(|(k, _)| k.starts_with("adam.m.")));
+        assert!(a == b, "{tag}: checkpoints differ");
+        let epochs_done = a.iter().find(|(k, _)| k == "progress.epochs_done").unwrap();
+        assert_eq!(f64::from_bits(epochs_done.1[0]), best as f64);
+        let (la, lb) = (
+            read_log(&fw.log()).unwrap(),
+            read_log(&folder.log()).unwrap(),
+        );
+        assert_eq!(la.len(), epochs);
+        let losses = |l: &[EpochRecord]| {
+            l.iter()
+                .map(|r| (r.epoch, r.train_loss, r.val_loss, r.test_loss))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(losses(&la), losses(&lb), "{tag}: logs differ");
+        let (sa, sb) = (
+            read_status(&fw).unwrap().unwrap(),
+            read_status(&folder).unwrap(),
+        );
+        let sb = sb.unwrap();
+        assert_eq!(
+            (sa.epochs, sa.steps, sa.best_epoch),
+            (sb.epochs, sb.steps, sb.best_epoch)
+        );
+        assert_eq!(sb.stop_reason, StopReason::Budget);
+        let _ = std::fs::remove_dir_all(&whole);
+        let _ = std::fs::remove_dir_all(&parts);
+    }
+}
+
 #[test]
 fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weights() {
     let set = small_set(3, 8);
@@ -113,11 +223,16 @@ fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weigh
     let _ = std::fs::remove_dir_all(&early);
 }
 
-/// Rewrites a checkpoint in the layout of version 1: no metadata, Adam's names prefixed twice,
-/// the counters packed into `meta.*` tensors.
-fn to_version_1(path: &Path) {
+/// Rewrites a model folder's checkpoint in the layout of version 1: no metadata, the weights
+/// inside as `model.*`, Adam's names prefixed twice, the counters packed into `meta.*` tensors.
+fn to_version_1(folder: &ModelFolder) {
     use candle_core::Tensor;
-    let map = candle_core::safetensors::load(path, &Device::Cpu).unwrap();
+    let path = folder.checkpoint();
+    let mut map = candle_core::safetensors::load(&path, &Device::Cpu).unwrap();
+    let weights = candle_core::safetensors::load(folder.weights(), &Device::Cpu).unwrap();
+    let held = map.len();
+    map.extend(weights.into_iter().map(|(k, t)| (format!("model.{k}"), t)));
+    assert!(map.len() > held + 10);
     let get = |k: &str| map[k].flatten_all().unwrap();
     let cat =
         |keys: &[&str]| Tensor::cat(&keys.iter().map(|k| get(k)).collect::<Vec<_>>(), 0).unwrap();
@@ -149,7 +264,7 @@ fn to_version_1(path: &Path) {
     old.insert("meta.seconds".into(), get("progress.seconds"));
     // Eight progress tensors became five.
     assert_eq!(old.len(), map.len() - 3);
-    candle_core::safetensors::save(&old, path).unwrap();
+    candle_core::safetensors::save(&old, &path).unwrap();
 }
 
 fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
@@ -182,7 +297,7 @@ fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
     std::fs::write(&log, text).unwrap();
     if tag == "disk" {
         // Checkpoints written before the metadata convention resume exactly too.
-        to_version_1(&ModelFolder::new(&parts).checkpoint());
+        to_version_1(&ModelFolder::new(&parts));
     }
     let resumed = train(&request(&set, &parts, 4), &options(true, false), |_| {}).unwrap();
     assert_eq!(resumed.epochs_run, 2);
@@ -423,7 +538,13 @@ fn test_meshes_influence_neither_training_nor_the_chosen_checkpoint() {
         test_every_steps: 1,
         ..options(resume, force)
     };
-    let a = train(&request(&set, &out_a, 4), &options(false, false), |_| {}).unwrap();
+    // Run a keeps the weights chosen on the test loss, b only their epoch: nothing else
+    // changes.
+    let keep = TrainOptions {
+        keep_selected_on_test: true,
+        ..options(false, false)
+    };
+    let a = train(&request(&set, &out_a, 4), &keep, |_| {}).unwrap();
     assert_eq!(a.selected_on, Selection::Validation);
     let split = TrainedModel::load(&out_a, &Device::Cpu).unwrap().split;
     assert!(!split.val.is_empty() && !split.test.is_empty());
@@ -507,6 +628,24 @@ fn test_meshes_influence_neither_training_nor_the_chosen_checkpoint() {
         .unwrap()
         .epoch;
     assert_eq!(on_test.epochs_trained().unwrap().1, best_test);
+    // Without the option, run.json names the epoch and the error says how to keep them.
+    assert!(!fb.weights_selected_on_test().is_file());
+    let best_test_b = log_b
+        .iter()
+        .min_by(|x, y| x.test_loss.unwrap().total_cmp(&y.test_loss.unwrap()))
+        .unwrap()
+        .epoch;
+    let status = meshvae::read_status(&fb).unwrap().unwrap();
+    assert_eq!(status.best_test_epoch, Some(best_test_b));
+    let err = TrainedModel::load_selected(&out_b, &Device::Cpu, true)
+        .err()
+        .unwrap()
+        .to_string();
+    let epoch = format!("epoch {best_test_b}");
+    assert!(
+        err.contains("--keep-selected-on-test") && err.contains(&epoch),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&out_a);
     let _ = std::fs::remove_dir_all(&out_b);
 }

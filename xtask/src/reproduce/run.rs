@@ -212,6 +212,8 @@ pub fn execute(
         force: !resume,
         progress: false,
         checkpoint_seconds,
+        // The results page reports the authors' choice beside ours.
+        keep_selected_on_test: true,
         ..TrainOptions::default()
     };
     let mut session_train = 0.0;
@@ -483,6 +485,8 @@ mod tests {
             rollbacks: 0,
             seconds: 0.2,
             path: "engine".into(),
+            best_test_epoch: None,
+            best_test_loss: None,
         };
         for (reason, done) in [
             (StopReason::Interrupted, false),

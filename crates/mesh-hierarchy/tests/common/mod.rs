@@ -1,7 +1,7 @@
 //! Helpers shared by the acceptance tests: test meshes, fields, comparisons, references.
 #![allow(dead_code)] // each test file uses some of them
 
-use mesh_hierarchy::{DepoolMode, HierarchyConfig, Pooler};
+use mesh_hierarchy::{DepoolMode, Hierarchy, HierarchyConfig, Pooler};
 use mesh_io::TriMesh;
 use qem_simplify::shapes::{bumpy_grid, icosphere, torus};
 
@@ -30,6 +30,22 @@ pub fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
 
 pub fn temp_path(name: &str) -> std::path::PathBuf {
     std::env::temp_dir().join(format!("mesh-hierarchy-{}-{name}", std::process::id()))
+}
+
+/// Writes `h` as a version-1 file, exactly as `Hierarchy::save` did before version 2 (JSON).
+pub fn write_json_v1(h: &Hierarchy, path: &std::path::Path) {
+    #[derive(serde::Serialize)]
+    struct FileOut<'a> {
+        format: &'a str,
+        version: u32,
+        hierarchy: &'a Hierarchy,
+    }
+    let out = FileOut {
+        format: "meshvae-hierarchy",
+        version: 1,
+        hierarchy: h,
+    };
+    std::fs::write(path, serde_json::to_vec(&out).unwrap()).unwrap();
 }
 
 /// Dense P (mean) and D (copy or Pᵀ) built from `cluster_of` alone.

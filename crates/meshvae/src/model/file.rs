@@ -93,19 +93,28 @@ impl MeshVae {
 
     /// Writes every variable and the configuration to `path` (atomically).
     pub fn save(&self, path: &Path) -> Result<()> {
-        self.save_snapshot(&self.tensors()?, path)
+        self.save_snapshot(&self.tensors()?, path, None)
     }
 
     /// Writes `tensors` (taken earlier by [`Self::tensors`], e.g. the best epoch's) as this
-    /// model's weights file.
-    pub fn save_snapshot(&self, tensors: &BTreeMap<String, Tensor>, path: &Path) -> Result<()> {
+    /// model's weights file; `epoch`, the training epoch they are from, goes into the metadata
+    /// (`epoch`), where a checkpoint finds the weights it continues from.
+    pub fn save_snapshot(
+        &self,
+        tensors: &BTreeMap<String, Tensor>,
+        path: &Path,
+        epoch: Option<usize>,
+    ) -> Result<()> {
         let config = serde_json::to_string(&self.config)
             .map_err(|e| VaeError::model(path, format!("config to JSON: {e}")))?;
-        let metadata = BTreeMap::from([
+        let mut metadata = BTreeMap::from([
             ("config".to_string(), config),
             ("tied".to_string(), tied_json(&self.config)),
             ("layout".to_string(), WEIGHTS_LAYOUT.to_string()),
         ]);
+        if let Some(epoch) = epoch {
+            metadata.insert(EPOCH_KEY.to_string(), epoch.to_string());
+        }
         write_stamped(path, WEIGHTS_STAMP, metadata, entries(tensors))?;
         Ok(())
     }
@@ -113,8 +122,20 @@ impl MeshVae {
     /// Reads weights written by [`Self::save`] for the same configuration and vertex counts.
     /// Nothing is changed on error.
     pub fn load(&mut self, path: &Path) -> Result<()> {
+        self.load_epoch(path).map(|_| ())
+    }
+
+    /// As [`Self::load`], and returns the training epoch the file says the weights are from
+    /// (`None` for weights saved outside training, or before files said so).
+    pub fn load_epoch(&mut self, path: &Path) -> Result<Option<usize>> {
         let data = std::fs::read(path).map_err(|e| VaeError::io(path, e))?;
         let file = read_stamped(&data, path, WEIGHTS_STAMP).map_err(stamped_error)?;
+        let epoch = match file.metadata.get(EPOCH_KEY) {
+            None => None,
+            Some(text) => Some(text.parse::<usize>().map_err(|_| {
+                VaeError::model(path, format!("unreadable epoch {text:?} in the metadata"))
+            })?),
+        };
         let saved = read_config(&file.metadata).map_err(|what| VaeError::model(path, what))?;
         if saved != self.config {
             return Err(VaeError::model(
@@ -128,9 +149,13 @@ impl MeshVae {
         }
         let tensors = candle_core::safetensors::load_buffer(&data, &self.device)
             .map_err(|e| VaeError::model(path, format!("not a readable safetensors file: {e}")))?;
-        self.set_tensors(&tensors, path)
+        self.set_tensors(&tensors, path)?;
+        Ok(epoch)
     }
 }
+
+/// The metadata entry of a weights file written by training: the epoch of the weights.
+pub const EPOCH_KEY: &str = "epoch";
 
 /// The tensors as lazily converted entries, so that a big model is never twice in memory as
 /// bytes.
