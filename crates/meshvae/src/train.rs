@@ -25,32 +25,33 @@
 use crate::adam::Adam;
 use crate::checkpoint::{Checkpoint, Progress};
 use crate::config::ModelConfig;
-use crate::data::MeshData;
 use crate::error::Result;
 use crate::folder::{ModelFolder, TrainConfig};
-use crate::loss::LossWeights;
 use crate::model::MeshVae;
 use crate::rng::Rng;
 use crate::schedule::{Decision, Schedule, ScheduleState, StopReason};
 use crate::split::{Selection, Split};
 use candle_core::Device;
 use deform_features::FeatureOptions;
-use indicatif::{ProgressBar, ProgressStyle};
 use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
-use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Instant;
 
+mod bar;
 mod best;
 mod epoch_log;
+mod loss_pass;
 mod rollback;
 mod setup;
 mod status;
 
+use bar::progress_bar;
 use best::{BestState, keep_weights, write_current};
-pub use epoch_log::read_log;
+pub use epoch_log::{EpochRecord, read_log};
 use epoch_log::{append_log, truncate_log};
+use loss_pass::epoch_loss;
+pub use loss_pass::validation_loss;
 use rollback::Recovery;
 use setup::{fresh_setup, resume_setup, write_model_files};
 pub use status::{RunStatus, read_status};
@@ -129,42 +130,6 @@ impl Default for TrainOptions {
             engine: true,
             fail_step: None,
             fail_after_rollback: false,
-        }
-    }
-}
-
-/// One line of `log.jsonl`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EpochRecord {
-    pub epoch: usize,
-    /// Mean over the epoch's training meshes of the total loss and of its weighted terms.
-    pub train_loss: f64,
-    pub rec: f64,
-    pub kl: f64,
-    pub l2: f64,
-    /// Validation loss on the validation meshes (none if the split has none).
-    #[serde(default)]
-    pub val_loss: Option<f64>,
-    /// The same loss on the test meshes (none if the split has none).
-    pub test_loss: Option<f64>,
-    pub seconds: f64,
-    /// Optimizer steps taken so far, this epoch's included (0 in logs written before steps
-    /// were counted).
-    #[serde(default)]
-    pub step: u64,
-    /// The learning rate of the epoch's last step (absent from older logs).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub lr: Option<f64>,
-}
-
-impl EpochRecord {
-    /// The loss `selection` ranks epochs by (the training loss where the validation loss is
-    /// missing; an epoch whose test loss was not measured never wins on the test loss).
-    pub fn score(&self, selection: Selection) -> f64 {
-        match selection {
-            Selection::Validation => self.val_loss.unwrap_or(self.train_loss),
-            Selection::Train => self.train_loss,
-            Selection::Test => self.test_loss.unwrap_or(f64::INFINITY),
         }
     }
 }
@@ -630,59 +595,4 @@ pub fn train(
         selected_on: selection,
         seconds: start.elapsed().as_secs_f64(),
     })
-}
-
-/// w_rec · mean over `ids` of the squared error with z = μ (inference mode), or `None`.
-pub fn validation_loss(
-    model: &MeshVae,
-    data: &MeshData,
-    ids: &[usize],
-    batch: usize,
-    weights: &LossWeights,
-    device: &Device,
-) -> Result<Option<f64>> {
-    epoch_loss(model, data, ids, batch, weights, device, None)
-}
-
-/// [`validation_loss`], through `engine` if given (it must be the model's).
-fn epoch_loss(
-    model: &MeshVae,
-    data: &MeshData,
-    ids: &[usize],
-    batch: usize,
-    weights: &LossWeights,
-    device: &Device,
-    mut engine: Option<&mut crate::model::Engine>,
-) -> Result<Option<f64>> {
-    if ids.is_empty() {
-        return Ok(None);
-    }
-    let mut sum = 0.0;
-    for chunk in ids.chunks(batch.max(1)) {
-        let x = data.batch(chunk, device)?;
-        let error = match engine.as_deref_mut() {
-            Some(engine) => engine.rec_error(model, &x, weights)?,
-            None => {
-                let c = data.conditions(model, chunk)?;
-                model.rec_error_cond(&x, c.as_ref(), weights)?
-            }
-        };
-        sum += error * chunk.len() as f64;
-    }
-    Ok(Some(sum / ids.len() as f64))
-}
-
-fn progress_bar(show: bool, epochs: usize, done: usize, steps: usize) -> ProgressBar {
-    if !show {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new((epochs * steps) as u64);
-    bar.set_position((done * steps) as u64);
-    if let Ok(style) = ProgressStyle::with_template(
-        "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
-    ) {
-        bar.set_style(style);
-    }
-    bar.set_message(format!("epoch {done}/{epochs}"));
-    bar
 }

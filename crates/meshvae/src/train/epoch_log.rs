@@ -1,9 +1,46 @@
 //! `log.jsonl`: one JSON line per finished epoch.
 
-use super::EpochRecord;
 use crate::error::{Result, VaeError};
+use crate::split::Selection;
+use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;
+
+/// One line of `log.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochRecord {
+    pub epoch: usize,
+    /// Mean over the epoch's training meshes of the total loss and of its weighted terms.
+    pub train_loss: f64,
+    pub rec: f64,
+    pub kl: f64,
+    pub l2: f64,
+    /// Validation loss on the validation meshes (none if the split has none).
+    #[serde(default)]
+    pub val_loss: Option<f64>,
+    /// The same loss on the test meshes (none if the split has none).
+    pub test_loss: Option<f64>,
+    pub seconds: f64,
+    /// Optimizer steps taken so far, this epoch's included (0 in logs written before steps
+    /// were counted).
+    #[serde(default)]
+    pub step: u64,
+    /// The learning rate of the epoch's last step (absent from older logs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lr: Option<f64>,
+}
+
+impl EpochRecord {
+    /// The loss `selection` ranks epochs by (the training loss where the validation loss is
+    /// missing; an epoch whose test loss was not measured never wins on the test loss).
+    pub fn score(&self, selection: Selection) -> f64 {
+        match selection {
+            Selection::Validation => self.val_loss.unwrap_or(self.train_loss),
+            Selection::Train => self.train_loss,
+            Selection::Test => self.test_loss.unwrap_or(f64::INFINITY),
+        }
+    }
+}
 
 pub(super) fn append_log(path: &Path, record: &EpochRecord) -> Result<()> {
     let line = serde_json::to_string(record).map_err(|e| VaeError::model(path, e.to_string()))?;
