@@ -43,6 +43,7 @@
 
 mod axis;
 mod camera;
+mod chart_backend;
 pub mod colormap;
 mod error;
 mod image;

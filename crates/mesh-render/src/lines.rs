@@ -2,6 +2,7 @@
 //! or epoch for several splits — on a linear or logarithmic y axis, with labelled vertical markers.
 
 use crate::axis::{Axis, tick_label};
+use crate::chart_backend::ChartBackend;
 use crate::error::RenderError;
 use crate::image::Image;
 use crate::plot::{
@@ -228,7 +229,7 @@ fn data_ranges(
 
 type DrawResult<T> = Result<T, Box<dyn std::error::Error>>;
 
-type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<Axis, Axis>>;
+type Chart<'a, 'b> = ChartContext<'a, ChartBackend<'b>, Cartesian2d<Axis, Axis>>;
 
 fn draw(
     buf: &mut [u8],
@@ -237,7 +238,7 @@ fn draw(
     markers: &[Marker],
     (x_range, y_range): (Range, Range),
 ) -> DrawResult<Frame> {
-    let root = BitMapBackend::with_buffer(buf, (plot.width, plot.height)).into_drawing_area();
+    let root = ChartBackend::with_buffer(buf, (plot.width, plot.height)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut layout = layout(&root, plot, markers, (&x_range, &y_range))?;
     let x_axis = Axis::new(&x_range, false, std::mem::take(&mut layout.x_ticks));
@@ -249,12 +250,7 @@ fn draw(
             .into_font()
             .color(&RGBColor(30, 30, 34))
             .pos(Pos::new(HPos::Center, VPos::Top));
-        let th = root.estimate_text_size(plot.title, &style)?.1 as i32;
-        root.draw_text(
-            plot.title,
-            &style,
-            (plot.width as i32 / 2, layout.margin + (th / 2).min(5)),
-        )?;
+        root.draw_text(plot.title, &style, (plot.width as i32 / 2, layout.margin))?;
     }
     let mut chart = ChartBuilder::on(&root)
         .margin(layout.margin)

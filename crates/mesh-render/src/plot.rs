@@ -1,10 +1,12 @@
 //! Scatter plots with plotters (embedded font, in-memory bitmap): latent embeddings, PCA, t-SNE.
 
+use crate::chart_backend::ChartBackend;
 use crate::colormap::{VIRIDIS_STOPS, sample};
 use crate::error::RenderError;
 use crate::image::{Image, check_size};
 use crate::text::{FAMILY, draw_error, ensure_font};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// One set of 2-D points of a [`scatter`] plot.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -171,11 +173,18 @@ fn draw(
     let radius = (f64::from(width.min(height)) / 150.0)
         .clamp(2.5, 6.0)
         .round() as i32;
-    let root = BitMapBackend::with_buffer(buf, (width, height)).into_drawing_area();
+    let root = ChartBackend::with_buffer(buf, (width, height)).into_drawing_area();
     root.fill(&WHITE)?;
+    // The title at the top margin and a gap below it (as in the line plot): its box (ascent to
+    // descent) already has room above the capitals, which plotters' caption would pad again.
+    let margin = (h / 40.0).max(6.0) as u32;
+    let title_style =
+        TextStyle::from((FAMILY, title_px).into_font()).pos(Pos::new(HPos::Center, VPos::Top));
+    let th = root.estimate_text_size(title, &title_style)?.1;
+    root.draw_text(title, &title_style, (width as i32 / 2, margin as i32))?;
     let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FAMILY, title_px).into_font())
-        .margin((h / 40.0).max(6.0) as u32)
+        .margin(margin)
+        .margin_top(margin + th + (th / 2).min(5))
         .x_label_area_size((tick_px + desc_px * 2.2) as u32)
         .y_label_area_size((tick_px * 4.0 + desc_px * 1.8) as u32)
         .build_cartesian_2d(x_range, y_range)?;

@@ -3,7 +3,7 @@
 use crate::colormap::error_color;
 use crate::error::RenderError;
 use crate::image::{Image, check_size};
-use crate::text::{self, Anchor, Style};
+use crate::text::{self, Anchor, Style, Turn};
 
 /// One picture of a [`sheet`] and the caption written under it.
 #[derive(Debug, Clone, PartialEq)]
@@ -193,7 +193,7 @@ pub fn with_colorbar(image: &Image, max: f32, label: &str) -> Result<Image, Rend
     }
     if !label.is_empty() {
         let vertical = Style {
-            vertical: true,
+            turn: Turn::Cw270,
             ..style
         };
         let fitted = text::fit(label, &style, h.saturating_sub(8))?;

@@ -3,12 +3,13 @@
 
 use super::{DrawResult, LinePlot, Marker};
 use crate::axis::{linear_ticks, log_ticks, tick_label};
+use crate::chart_backend::ChartBackend;
 use crate::plot::Range;
 use crate::text::FAMILY;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-type Root<'b> = DrawingArea<BitMapBackend<'b>, Shift>;
+type Root<'b> = DrawingArea<ChartBackend<'b>, Shift>;
 
 /// Pixel sizes of the texts and the reserved areas, derived from the image size.
 pub(super) struct Layout {
@@ -59,7 +60,8 @@ pub(super) fn layout(
     } else {
         let style = TextStyle::from((FAMILY, title_px).into_font());
         let th = f64::from(root.estimate_text_size(plot.title, &style)?.1);
-        th + 2.0 * (th / 2.0).min(5.0).floor()
+        // The title's box (ascent to descent) has room above the capitals: a gap below only.
+        th + (th / 2.0).min(5.0).floor()
     };
     let row_px = (tick_px * 1.35).ceil();
     let any_label = markers.iter().any(|m| !m.label.is_empty());

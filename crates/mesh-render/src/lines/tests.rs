@@ -132,7 +132,9 @@ fn dashed_marker_is_a_broken_column() {
         dashed: true,
     };
     let (image, frame) = render(&log_plot(), &curves, &[marker]).unwrap();
-    let x = frame.x.start + (50.0 / 199.0 * f64::from(frame.x.end - frame.x.start)).floor() as i32;
+    // plotters maps the x range onto the frame's first to last pixel (end - 1, not end).
+    let x =
+        frame.x.start + (50.0 / 199.0 * f64::from(frame.x.end - 1 - frame.x.start)).floor() as i32;
     let (on, gaps) = (frame.y.start..frame.y.end).fold((0, 0), |(on, gaps), y| {
         match image.pixel(x as u32, y as u32) == Some(MARKER_DASHED) {
             true => (on + 1, gaps),
