@@ -628,6 +628,21 @@ fn test_meshes_influence_neither_training_nor_the_chosen_checkpoint() {
         .unwrap()
         .epoch;
     assert_eq!(on_test.epochs_trained().unwrap().1, best_test);
+    // Weights of another epoch than run.json's choice (a resumed run that stopped keeping
+    // them, say) are refused as stale.
+    let status_path = fa.status();
+    let mut status: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&status_path).unwrap()).unwrap();
+    status["best_test_epoch"] = serde_json::json!(best_test + 100);
+    std::fs::write(&status_path, status.to_string()).unwrap();
+    let err = TrainedModel::load_selected(&out_a, &Device::Cpu, true)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("stale") && err.contains(&format!("epoch {best_test}")),
+        "{err}"
+    );
     // Without the option, run.json names the epoch and the error says how to keep them.
     assert!(!fb.weights_selected_on_test().is_file());
     let best_test_b = log_b
