@@ -221,36 +221,8 @@ fn read_f32(bytes: &[u8]) -> Vec<f32> {
 mod tests {
     use super::*;
 
-    /// A scratch file in a folder of its own, both removed when dropped (tests run in
-    /// parallel, so no folder is shared).
-    struct Scratch(std::path::PathBuf);
-
-    impl Drop for Scratch {
-        fn drop(&mut self) {
-            if let Some(dir) = self.0.parent() {
-                let _ = std::fs::remove_dir_all(dir);
-            }
-        }
-    }
-
-    impl AsRef<std::path::Path> for Scratch {
-        fn as_ref(&self) -> &std::path::Path {
-            &self.0
-        }
-    }
-
-    impl std::ops::Deref for Scratch {
-        type Target = std::path::Path;
-        fn deref(&self) -> &std::path::Path {
-            &self.0
-        }
-    }
-
-    fn temp(name: &str) -> Scratch {
-        let pid = std::process::id();
-        let dir = std::env::temp_dir().join(format!("deform-features-io-{pid}-{name}"));
-        std::fs::create_dir_all(&dir).unwrap();
-        Scratch(dir.join(name))
+    fn temp(name: &str) -> mesh_io::scratch::ScratchFile {
+        mesh_io::scratch::ScratchFile::new("deform-features-io", name).unwrap()
     }
 
     fn sample() -> FeatureFile {

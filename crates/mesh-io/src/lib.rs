@@ -42,6 +42,7 @@ pub mod obj;
 pub mod off;
 pub mod ply;
 mod quality;
+pub mod scratch;
 pub mod set;
 pub mod stamped;
 pub mod synth;

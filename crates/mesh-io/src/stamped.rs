@@ -283,36 +283,8 @@ mod tests {
         version: 2,
     };
 
-    /// A scratch file in a folder of its own, both removed when dropped (tests run in
-    /// parallel, so no folder is shared).
-    struct Scratch(std::path::PathBuf);
-
-    impl Drop for Scratch {
-        fn drop(&mut self) {
-            if let Some(dir) = self.0.parent() {
-                let _ = std::fs::remove_dir_all(dir);
-            }
-        }
-    }
-
-    impl AsRef<std::path::Path> for Scratch {
-        fn as_ref(&self) -> &std::path::Path {
-            &self.0
-        }
-    }
-
-    impl std::ops::Deref for Scratch {
-        type Target = std::path::Path;
-        fn deref(&self) -> &std::path::Path {
-            &self.0
-        }
-    }
-
-    fn temp(name: &str) -> Scratch {
-        let pid = std::process::id();
-        let dir = std::env::temp_dir().join(format!("mesh-io-stamped-{pid}-{name}"));
-        std::fs::create_dir_all(&dir).unwrap();
-        Scratch(dir.join(name))
+    fn temp(name: &str) -> crate::scratch::ScratchFile {
+        crate::scratch::ScratchFile::new("mesh-io-stamped", name).unwrap()
     }
 
     fn sample(path: &Path) {
