@@ -7,7 +7,8 @@
 //! magnitude faster than the OBJ files it came from, and [`ShapeGroups`]: which meshes of a set
 //! are one shape (an animation cycle stored twice), for splits that keep such twins together.
 //! [`stamped`] holds the metadata convention (format, version, writer, CRC-32 checksum) of
-//! every safetensors file the tool writes, the `.mvset` cache among them.
+//! every safetensors file the tool writes, the `.mvset` cache among them; [`scratch`] gives the
+//! workspace's tests a file in a temporary folder of its own, removed when dropped.
 //!
 //! Every problem is a typed [`MeshIoError`] naming the file and what is wrong; nothing panics on
 //! bad input, and every writer writes a temporary file and renames it.
