@@ -43,9 +43,7 @@ fn step(c: &mut Criterion) {
         group
             .sample_size(10)
             .measurement_time(Duration::from_secs(10));
-        let mut engine = Engine::new(&model, BATCH)
-            .expect("engine")
-            .expect("the engine supports the paper's network");
+        let mut engine = Engine::new(&model, BATCH).expect("the engine covers the paper's network");
         group.bench_function("batch 32, f32: engine (what train() runs)", |b| {
             b.iter(|| {
                 let eps = rng

@@ -67,9 +67,7 @@ fn run() -> Result<String, String> {
     let device = Device::Cpu;
     let model = MeshVae::new(&config, &hierarchy, &device, 1).map_err(|e| e.to_string())?;
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).map_err(|e| e.to_string())?;
-    let mut engine = Engine::new(&model, BATCH)
-        .map_err(|e| e.to_string())?
-        .ok_or("the engine declined the paper's network")?;
+    let mut engine = Engine::new(&model, BATCH).map_err(|e| e.to_string())?;
     let mut rng = Rng::new(7);
     let v = set.vertex_count();
     let data: Vec<f32> = (0..BATCH * v * 9)

@@ -11,9 +11,7 @@
 use candle_core::{DType, Device};
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
-use meshvae::{
-    ConvKind, ModelConfig, PoolKind, TrainConfig, TrainOptions, TrainRequest, TrainedModel,
-};
+use meshvae::{ConvKind, ModelConfig, TrainConfig, TrainOptions, TrainRequest, TrainedModel};
 use std::path::Path;
 
 const EPOCHS: usize = 20;
@@ -124,9 +122,9 @@ fn check(got: &[String], pinned: &[&str]) {
     assert_eq!(got, pinned, "results moved from the pinned figures");
 }
 
-fn model(pool: PoolKind) -> ModelConfig {
+fn model(pool: &str) -> ModelConfig {
     ModelConfig {
-        pool,
+        pool: pool.parse().expect("a pooling"),
         latent: 16,
         ..ModelConfig::default()
     }
@@ -144,24 +142,25 @@ fn synthetic_set_results_are_pinned() {
     })
     .expect("synthetic set")
     .set;
-    let mut cases: Vec<Case> = PoolKind::ALL
+    // By name, so that the cases keep their order and names whatever the enum's.
+    let mut cases: Vec<Case> = ["mean", "max", "qem", "sampling", "none", "graph", "remesh"]
         .iter()
         .map(|&pool| Case {
-            name: format!("{pool:?}").to_lowercase(),
+            name: pool.into(),
             model: model(pool),
             engine: true,
         })
         .collect();
     cases.push(Case {
         name: "mean-candle".into(),
-        model: model(PoolKind::Mean),
+        model: model("mean"),
         engine: false,
     });
     cases.push(Case {
         name: "spatial".into(),
         model: ModelConfig {
             conv: ConvKind::Spatial,
-            ..model(PoolKind::Mean)
+            ..model("mean")
         },
         engine: true,
     });
@@ -169,7 +168,7 @@ fn synthetic_set_results_are_pinned() {
         name: "spatial-candle".into(),
         model: ModelConfig {
             conv: ConvKind::Spatial,
-            ..model(PoolKind::Mean)
+            ..model("mean")
         },
         engine: false,
     });
@@ -177,14 +176,14 @@ fn synthetic_set_results_are_pinned() {
         name: "tied-convs".into(),
         model: ModelConfig {
             tie_decoder_convs: true,
-            ..model(PoolKind::Mean)
+            ..model("mean")
         },
         engine: true,
     });
     let labels = set.labels().expect("labelled set").to_vec();
     cases.push(Case {
         name: "conditional".into(),
-        model: model(PoolKind::Mean).conditional_on(&labels),
+        model: model("mean").conditional_on(&labels),
         engine: true,
     });
     let got: Vec<String> = cases.iter().map(|c| run(&set, c, 4, "synth")).collect();

@@ -340,6 +340,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         summary.selected_on,
         summary.best_loss
     );
+    if let Some(executor) = &summary.executor {
+        out!("steps computed by: {executor}");
+    }
     match summary.stop_reason {
         meshvae::StopReason::Converged => out!(
             "stopped: converged (no new best {} loss for {} steps; learning rate now {:.2e})",

@@ -149,6 +149,7 @@ mod tests {
             rollbacks: 0,
             seconds: 3.0,
             path: "engine".into(),
+            executor_reason: None,
             best_test_epoch: None,
             best_test_loss: None,
         };

@@ -41,6 +41,7 @@ use std::time::Instant;
 mod bar;
 mod best;
 mod epoch_log;
+mod executor;
 mod loss_pass;
 mod rollback;
 mod setup;
@@ -49,6 +50,7 @@ mod status;
 use bar::progress_bar;
 use best::{BestState, keep_weights, write_current};
 pub use epoch_log::{EpochRecord, read_log};
+pub use executor::{Executor, ExecutorKind};
 use epoch_log::{append_log, truncate_log};
 use loss_pass::epoch_loss;
 pub use loss_pass::validation_loss;
@@ -159,6 +161,8 @@ pub struct TrainSummary {
     pub best_loss: f64,
     pub selected_on: Selection,
     pub seconds: f64,
+    /// What computed this call's steps (`None` when it ran none).
+    pub executor: Option<Executor>,
 }
 
 /// The hierarchy settings a model configuration needs.
@@ -263,14 +267,16 @@ pub fn train(
             best_loss: progress.best_loss,
             selected_on: selection,
             seconds: start.elapsed().as_secs_f64(),
+            executor: None,
         });
     }
     truncate_log(&folder.log(), progress.epoch)?;
     let mut rng = Rng::from_state(progress.rng)?;
     let base_lr = spec.train.lr;
-    // Which path trains, said in `run.json` (the engine declines some models; see
-    // `Engine::unsupported`).
-    let engine_used = options.engine && crate::model::Engine::unsupported(&model).is_none();
+    // Which path trains, and why candle where it is candle: said on every line of `log.jsonl`,
+    // in `run.json` and in the summary.
+    let executor = Executor::choose(&model, options.engine);
+    let engine_used = executor.kind == ExecutorKind::Engine;
     adam.set_lr(
         progress
             .schedule
@@ -292,7 +298,8 @@ pub fn train(
         lr_cuts: progress.schedule.cuts,
         rollbacks: progress.schedule.rollbacks,
         seconds: progress.seconds,
-        path: if engine_used { "engine" } else { "candle" }.into(),
+        path: executor.kind.to_string(),
+        executor_reason: executor.reason.clone(),
         best_test_epoch: (progress.best_test_epoch > 0).then_some(progress.best_test_epoch),
         best_test_loss: progress
             .best_test_loss
@@ -345,10 +352,10 @@ pub fn train(
         // checkpoints, so that its buffers (~0.6 GB on elephant-gallop at batch 16) never
         // coexist with a checkpoint's copies; a small one's is kept (building it and touching
         // fresh pages cost ~10 % of a horse-gallop epoch).
-        let mut engine = match (kept_engine.take(), options.engine) {
-            (Some(engine), _) => Some(engine),
-            (None, true) => crate::model::Engine::new(&model, batch)?,
-            (None, false) => None,
+        let mut engine = match kept_engine.take() {
+            Some(engine) => Some(engine),
+            None if engine_used => Some(crate::model::Engine::new(&model, batch)?),
+            None => None,
         };
         let mut divergence = None;
         for chunk in order.chunks(batch) {
@@ -507,6 +514,8 @@ pub fn train(
             seconds: t0.elapsed().as_secs_f64(),
             step: adam.step_count(),
             lr: Some(adam.config().lr),
+            executor: Some(executor.kind),
+            executor_reason: executor.reason.clone(),
         };
         debug_assert_eq!(score, record.score(selection));
         let improved = score < progress.best_loss;
@@ -594,5 +603,6 @@ pub fn train(
         best_loss: progress.best_loss,
         selected_on: selection,
         seconds: start.elapsed().as_secs_f64(),
+        executor: Some(executor),
     })
 }

@@ -7,7 +7,7 @@ use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
 use meshvae::{
-    DEFAULT_MAX_STEPS, EpochRecord, ModelConfig, ModelFolder, RunStatus, Schedule, Selection,
+    DEFAULT_MAX_STEPS, EpochRecord, ExecutorKind, ModelConfig, ModelFolder, RunStatus, Schedule, Selection,
     Split, SplitFile, StopReason, TrainConfig, TrainOptions, TrainRequest, TrainSummary,
     TrainedModel, VaeError, read_log, read_status, train,
 };
@@ -792,6 +792,9 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
     assert_eq!(status.stop_reason, StopReason::Converged);
     assert_eq!(status.steps, summary.steps);
     assert_eq!(status.path, "engine");
+    assert_eq!(status.executor_reason, None);
+    let executor = summary.executor.clone().unwrap();
+    assert_eq!((executor.kind, executor.reason), (ExecutorKind::Engine, None));
     let text = std::fs::read_to_string(folder.status()).unwrap();
     assert!(text.contains("\"stop_reason\": \"converged\""), "{text}");
 
@@ -800,6 +803,10 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
     let log = read_log(&folder.log()).unwrap();
     let last = log.last().unwrap();
     assert_eq!(last.step, summary.steps);
+    assert!(
+        log.iter()
+            .all(|r| r.executor == Some(ExecutorKind::Engine) && r.executor_reason.is_none())
+    );
     let cut = last.step - schedule.patience as u64;
     let before = log
         .iter()
@@ -849,6 +856,44 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
     );
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&short);
+}
+
+/// A run the engine does not take says so, with the reason, in the summary, on every line of
+/// the log and in `run.json`.
+#[test]
+fn candle_runs_say_why() {
+    let set = small_set(7, 8);
+    for (tag, tied, engine, why) in [
+        ("tied", true, true, "tied decoder convolutions"),
+        ("no-engine", false, false, "--no-engine"),
+    ] {
+        let dir = scratch(&format!("executor-{tag}"));
+        let mut req = request(&set, &dir, 3);
+        req.model.tie_decoder_convs = tied;
+        let options = TrainOptions {
+            engine,
+            ..options(false, false)
+        };
+        let summary = train(&req, &options, |_| {}).unwrap();
+        let executor = summary.executor.unwrap();
+        assert_eq!(executor.kind, ExecutorKind::Candle, "{tag}");
+        let reason = executor.reason.clone().unwrap();
+        assert!(reason.contains(why), "{tag}: {reason}");
+        assert!(executor.to_string().starts_with("candle ("), "{tag}");
+        let folder = ModelFolder::new(&dir);
+        let log = read_log(&folder.log()).unwrap();
+        assert_eq!(log.len(), 3);
+        for r in &log {
+            assert_eq!(r.executor, Some(ExecutorKind::Candle), "{tag}");
+            assert_eq!(r.executor_reason.as_deref(), Some(reason.as_str()), "{tag}");
+        }
+        let text = std::fs::read_to_string(folder.log()).unwrap();
+        assert!(text.contains("\"executor\":\"candle\""), "{text}");
+        let status = read_status(&folder).unwrap().unwrap();
+        assert_eq!(status.path, "candle");
+        assert_eq!(status.executor_reason.as_deref(), Some(reason.as_str()));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
 
 fn options_resume() -> TrainOptions {

@@ -485,6 +485,7 @@ mod tests {
             rollbacks: 0,
             seconds: 0.2,
             path: "engine".into(),
+            executor_reason: None,
             best_test_epoch: None,
             best_test_loss: None,
         };

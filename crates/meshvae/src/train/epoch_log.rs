@@ -28,6 +28,12 @@ pub struct EpochRecord {
     /// The learning rate of the epoch's last step (absent from older logs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lr: Option<f64>,
+    /// What computed the epoch's steps (absent from older logs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub executor: Option<super::ExecutorKind>,
+    /// Why candle computed them rather than the engine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub executor_reason: Option<String>,
 }
 
 impl EpochRecord {

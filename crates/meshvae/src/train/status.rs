@@ -35,6 +35,9 @@ pub struct RunStatus {
     pub seconds: f64,
     /// What computed the steps: `engine` (the hand-written CPU step) or `candle` (autograd).
     pub path: String,
+    /// Why `candle` rather than the engine (absent for the engine and from older records).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub executor_reason: Option<String>,
     /// The epoch with the lowest test loss and that loss (the authors' choice of checkpoint;
     /// its weights are kept only when asked, `weights-selected-on-test.safetensors`). Absent
     /// without test meshes, and from older records.

@@ -93,11 +93,15 @@ impl Engine {
         None
     }
 
-    /// An engine for `model` with buffers for batches of up to `max_batch` meshes, or `None`
-    /// when [`Self::unsupported`] declines the model.
-    pub fn new(model: &MeshVae, max_batch: usize) -> Result<Option<Self>> {
-        if Self::unsupported(model).is_some() {
-            return Ok(None);
+    /// An engine for `model` with buffers for batches of up to `max_batch` meshes; an error
+    /// saying why when [`Self::unsupported`] declines the model (training asks first and says
+    /// which path it takes, `crate::Executor`).
+    pub fn new(model: &MeshVae, max_batch: usize) -> Result<Self> {
+        if let Some(why) = Self::unsupported(model) {
+            return Err(VaeError::argument(
+                "model",
+                format!("the CPU engine does not cover {why}"),
+            ));
         }
         if max_batch == 0 {
             return Err(VaeError::argument("max_batch", "must be at least 1"));
@@ -106,7 +110,7 @@ impl Engine {
             DType::F32 => Typed::F32(Net::build(model, max_batch)?),
             _ => Typed::F64(Net::build(model, max_batch)?),
         };
-        Ok(Some(Self { net }))
+        Ok(Self { net })
     }
 
     /// Forward and backward pass on features x `[B, V, 9]` and noise ε `[B, latent]` (the

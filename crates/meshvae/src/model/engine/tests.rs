@@ -67,7 +67,7 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     let (x, eps) = inputs(&reference, batch, 3);
     let loss = reference.training_loss(&x, &eps, &weights).unwrap();
     let grads = reference.backward(&loss.total).unwrap();
-    let mut engine = Engine::new(&ours, batch + 2).unwrap().unwrap();
+    let mut engine = Engine::new(&ours, batch + 2).unwrap();
     let got = engine.forward_backward(&ours, &x, &eps, &weights).unwrap();
     let case = format!(
         "{} {} {:?} K={} {dtype:?}",
@@ -192,7 +192,7 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
             ..Default::default()
         };
         let (model, _) = models(&config, dtype);
-        let mut engine = Engine::new(&model, 5).unwrap().unwrap();
+        let mut engine = Engine::new(&model, 5).unwrap();
         let mut adam = Adam::new(model.trainable_vars(), 1e-2).unwrap();
         // A few steps, so that the running statistics are neither 0/1 nor a batch's own.
         for seed in 0..3 {
@@ -224,7 +224,7 @@ fn train(config: &ModelConfig, engine: bool, steps: usize) -> Vec<Vec<f64>> {
     let (model, _) = models(config, DType::F64);
     let weights = LossWeights::default();
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
-    let mut e = engine.then(|| Engine::new(&model, 4).unwrap().unwrap());
+    let mut e = engine.then(|| Engine::new(&model, 4).unwrap());
     for step in 0..steps {
         // The last batch is smaller, as at the end of an epoch.
         let batch = if step + 1 == steps { 3 } else { 4 };
@@ -294,7 +294,8 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     };
     let (model, _) = models(&tied, DType::F32);
     assert!(Engine::unsupported(&model).unwrap().contains("tied"));
-    assert!(Engine::new(&model, 2).unwrap().is_none());
+    let err = Engine::new(&model, 2).unwrap_err().to_string();
+    assert!(err.contains("does not cover") && err.contains("tied"), "{err}");
 
     let config = ModelConfig {
         latent: 4,
@@ -302,7 +303,7 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     };
     let (model, _) = models(&config, DType::F64);
     assert!(Engine::new(&model, 0).is_err());
-    let mut engine = Engine::new(&model, 2).unwrap().unwrap();
+    let mut engine = Engine::new(&model, 2).unwrap();
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
     assert!(engine.apply_adam(&mut adam, 1.0).is_err(), "no step yet");
     let (x, eps) = inputs(&model, 3, 1);
