@@ -109,7 +109,7 @@ pub use schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
 pub use split::{Selection, Split, resolve_mesh};
 pub use structure::{Layer, Structure};
 pub use train::{
-    EpochRecord, Executor, ExecutorKind, RunStatus, TrainOptions, TrainRequest, TrainSummary, hierarchy_config, read_log,
-    read_status, train, validation_loss,
+    EpochRecord, Executor, ExecutorKind, RunStatus, TrainOptions, TrainRequest, TrainSummary,
+    hierarchy_config, read_log, read_status, train, validation_loss,
 };
 pub use tsne::{Calibration, TsneOptions, calibrate, tsne, tsne_cost};

@@ -7,8 +7,8 @@ use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
 use meshvae::{
-    DEFAULT_MAX_STEPS, EpochRecord, ExecutorKind, ModelConfig, ModelFolder, RunStatus, Schedule, Selection,
-    Split, SplitFile, StopReason, TrainConfig, TrainOptions, TrainRequest, TrainSummary,
+    DEFAULT_MAX_STEPS, EpochRecord, ExecutorKind, ModelConfig, ModelFolder, RunStatus, Schedule,
+    Selection, Split, SplitFile, StopReason, TrainConfig, TrainOptions, TrainRequest, TrainSummary,
     TrainedModel, VaeError, read_log, read_status, train,
 };
 use std::path::{Path, PathBuf};
@@ -794,7 +794,10 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
     assert_eq!(status.path, "engine");
     assert_eq!(status.executor_reason, None);
     let executor = summary.executor.clone().unwrap();
-    assert_eq!((executor.kind, executor.reason), (ExecutorKind::Engine, None));
+    assert_eq!(
+        (executor.kind, executor.reason),
+        (ExecutorKind::Engine, None)
+    );
     let text = std::fs::read_to_string(folder.status()).unwrap();
     assert!(text.contains("\"stop_reason\": \"converged\""), "{text}");
 

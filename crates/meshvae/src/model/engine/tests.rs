@@ -295,7 +295,10 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     let (model, _) = models(&tied, DType::F32);
     assert!(Engine::unsupported(&model).unwrap().contains("tied"));
     let err = Engine::new(&model, 2).unwrap_err().to_string();
-    assert!(err.contains("does not cover") && err.contains("tied"), "{err}");
+    assert!(
+        err.contains("does not cover") && err.contains("tied"),
+        "{err}"
+    );
 
     let config = ModelConfig {
         latent: 4,
