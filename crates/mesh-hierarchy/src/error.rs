@@ -8,7 +8,7 @@ pub enum HierarchyError {
     #[error(transparent)]
     Simplify(#[from] qem_simplify::SimplifyError),
     #[error(transparent)]
-    Csr(#[from] crate::sparse::CsrError),
+    Csr(#[from] sparse_csr::CsrError),
     #[error(transparent)]
     MeshIo(#[from] mesh_io::MeshIoError),
     /// A configuration value out of range (`argument` names it, e.g. `"ratio"`).

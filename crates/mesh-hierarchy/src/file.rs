@@ -82,7 +82,7 @@ fn checked(hierarchy: Hierarchy, path: &Path) -> Result<Hierarchy, HierarchyErro
         .map(|l| &l.laplacian)
         .chain(hierarchy.pooling.iter().flat_map(|p| [&p.pool, &p.depool]))
     {
-        m.check()
+        m.validate()
             .map_err(|e| HierarchyError::file(path, e.to_string()))?;
     }
     hierarchy

@@ -9,8 +9,8 @@
 use crate::error::HierarchyError;
 use crate::laplacian::try_adjacency;
 use crate::pooling::{Pooler, PoolingOp};
-use crate::sparse::CsrMatrix;
 use mesh_io::Face;
+use sparse_csr::CsrMatrix;
 
 /// The m×n membership matrix of the neighbourhoods: M[c, u] = 1 for u ∈ N(c) (columns
 /// ascending), for the fine mesh's `faces`, the simplifier's `survivors` (coarse → fine) and

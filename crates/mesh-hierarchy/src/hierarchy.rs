@@ -5,10 +5,10 @@ use crate::error::HierarchyError;
 use crate::laplacian::{LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian};
 use crate::pooling::{DepoolMode, Pooler, PoolingOp};
 use crate::sampling;
-use crate::sparse::CsrMatrix;
 use mesh_io::{Face, Point, TriMesh};
 use qem_simplify::{RemeshConfig, SimplifyConfig, Target, remesh, simplify};
 use serde::{Deserialize, Serialize};
+use sparse_csr::CsrMatrix;
 
 /// Settings of [`Hierarchy::build`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -2,8 +2,8 @@
 //! L = I − D^-1/2 A D^-1/2, and its rescaled form L̃ = 2L/λmax − I that Chebyshev filters use.
 
 use crate::error::HierarchyError;
-use crate::sparse::CsrMatrix;
 use mesh_io::Face;
+use sparse_csr::CsrMatrix;
 
 /// The undirected, unweighted vertex adjacency of a triangle mesh (no self-loops): A[i][j] = 1
 /// when i and j share an edge. As the authors' code: the binarised cotangent-weight pattern.

@@ -3,7 +3,8 @@
 //! **In:** a template mesh and a [`HierarchyConfig`] (pooler, number of pooling steps, ratio per
 //! step, λmax choice, de-pooling mode). **Out:** a [`Hierarchy`]: levels 0..=L, each with its
 //! connectivity, positions and rescaled Laplacian L̃ = 2L/λmax − I, and between consecutive
-//! levels a [`PoolingOp`] (pool m×n, de-pool n×m, all as [`CsrMatrix`]). Saved to and loaded
+//! levels a [`PoolingOp`] (pool m×n, de-pool n×m, all as [`CsrMatrix`], the type of the
+//! `sparse-csr` crate, re-exported here). Saved to and loaded
 //! from one file without recomputation ([`Hierarchy::save`], [`Hierarchy::load`]): safetensors
 //! of the workspace's stamped convention, bit-exact; the older JSON files still load.
 //!
@@ -44,7 +45,6 @@ mod hierarchy;
 pub mod laplacian;
 pub mod pooling;
 pub mod sampling;
-pub mod sparse;
 
 pub use error::HierarchyError;
 pub use file::{FORMAT, VERSION};
@@ -53,4 +53,4 @@ pub use laplacian::{
     LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian, try_adjacency,
 };
 pub use pooling::{DepoolMode, Pooler, PoolingOp, UnknownDepoolMode, UnknownPooler};
-pub use sparse::{CsrError, CsrMatrix};
+pub use sparse_csr::{CsrError, CsrMatrix};

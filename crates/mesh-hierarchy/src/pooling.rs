@@ -2,8 +2,8 @@
 //! in the paper's ablation.
 
 use crate::error::HierarchyError;
-use crate::sparse::CsrMatrix;
 use serde::{Deserialize, Serialize};
+use sparse_csr::CsrMatrix;
 use std::fmt;
 use std::str::FromStr;
 
@@ -193,16 +193,16 @@ impl PoolingOp {
         cluster_of: &[u32],
         coarse_count: usize,
         depool: DepoolMode,
-    ) -> Result<Self, crate::sparse::CsrError> {
+    ) -> Result<Self, sparse_csr::CsrError> {
         let mut clusters = vec![Vec::new(); coarse_count];
         for (v, &c) in cluster_of.iter().enumerate() {
             let cluster = clusters.get_mut(c as usize).ok_or_else(|| {
-                crate::sparse::CsrError(format!("cluster {c} beyond {coarse_count}"))
+                sparse_csr::CsrError(format!("cluster {c} beyond {coarse_count}"))
             })?;
             cluster.push(v as u32);
         }
         if let Some(c) = clusters.iter().position(Vec::is_empty) {
-            return Err(crate::sparse::CsrError(format!("cluster {c} is empty")));
+            return Err(sparse_csr::CsrError(format!("cluster {c} is empty")));
         }
         let mut pool_t = Vec::with_capacity(cluster_of.len());
         let mut depool_t = Vec::with_capacity(cluster_of.len());

@@ -10,8 +10,8 @@
 //! samba gets the global nearest triangle; on elephant-gallop 40 of 42,321 do not, and their
 //! closest point is at most 1e-4 of the bounding-box diagonal farther. The tests check it too.
 
-use crate::sparse::{CsrError, CsrMatrix};
 use mesh_io::{Face, Point};
+use sparse_csr::{CsrError, CsrMatrix};
 
 /// The m×n selection matrix: S[c, survivors[c]] = 1.
 pub fn selection(survivors: &[u32], fine_count: usize) -> Result<CsrMatrix, CsrError> {

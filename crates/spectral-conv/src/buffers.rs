@@ -65,26 +65,27 @@ impl SparseKernel {
             // Shared, not copied: the same entries in the same order.
             return Ok(self.clone());
         }
+        const OP: &str = "SparseKernel::permuted";
         let row_pos = rows
-            .map(|o| crate::order::positions(o, self.a.rows, ("SparseKernel::permuted", "rows")))
+            .map(|o| crate::order::positions(o, self.a.rows(), (OP, "rows")))
             .transpose()?;
         let col_pos = cols
-            .map(|o| crate::order::positions(o, self.a.cols, ("SparseKernel::permuted", "cols")))
+            .map(|o| crate::order::positions(o, self.a.cols(), (OP, "cols")))
             .transpose()?;
         Ok(Self {
-            a: Arc::new(self.a.permuted(rows, col_pos.as_deref())),
-            at: Arc::new(self.at.permuted(cols, row_pos.as_deref())),
+            a: Arc::new(self.a.permuted(rows, col_pos.as_deref(), (OP, "rows"))?),
+            at: Arc::new(self.at.permuted(cols, row_pos.as_deref(), (OP, "cols"))?),
         })
     }
 
     /// Rows of A (output vertices).
     pub fn rows(&self) -> usize {
-        self.a.rows
+        self.a.rows()
     }
 
     /// Columns of A (input vertices).
     pub fn cols(&self) -> usize {
-        self.a.cols
+        self.a.cols()
     }
 
     /// y = A x with `n` values per vertex: x `[cols, n]`, y `[rows, n]` (overwritten).
@@ -98,8 +99,8 @@ impl SparseKernel {
     }
 
     fn product<T: Float>(a: &Csr, x: &[T], y: &mut [T], n: usize, op: &'static str) -> Result<()> {
-        check_len(op, "x", x.len(), a.cols * n)?;
-        check_len(op, "y", y.len(), a.rows * n)?;
+        check_len(op, "x", x.len(), a.cols() * n)?;
+        check_len(op, "y", y.len(), a.rows() * n)?;
         spmm_axpby(a, T::from_f64(1.0), x, T::ZERO, None, y, n);
         Ok(())
     }
@@ -147,8 +148,8 @@ impl ChebKernel {
     pub fn far_share(&self, window: usize) -> f64 {
         let a = &self.a;
         let (mut far, mut all) = (0usize, 0usize);
-        for r in 0..a.rows {
-            for &c in &a.indices[a.indptr[r]..a.indptr[r + 1]] {
+        for r in 0..a.rows() {
+            for &c in a.columns(r) {
                 if c as usize != r {
                     all += 1;
                     far += usize::from((c as usize).abs_diff(r) > window);
@@ -166,33 +167,34 @@ impl ChebKernel {
     /// its pattern): `order[p]` is the vertex placed at position p.
     pub fn locality_order(&self) -> Vec<u32> {
         let a = &self.a;
-        crate::order::rcm(a.rows, |r| &a.indices[a.indptr[r]..a.indptr[r + 1]])
+        crate::order::rcm(a.rows(), |r| a.columns(r))
     }
 
     /// The same convolution on renumbered vertices (P L̃ Pᵀ, with `order[p]` the vertex at
     /// position p): on data renumbered the same way it gives the renumbered output.
     pub fn permuted(&self, order: &[u32]) -> Result<Self> {
-        let pos = crate::order::positions(order, self.a.rows, ("ChebKernel::permuted", "order"))?;
+        let arg = ("ChebKernel::permuted", "order");
+        let pos = crate::order::positions(order, self.a.rows(), arg)?;
         Ok(Self {
-            a: Arc::new(self.a.permuted(Some(order), Some(&pos))),
-            at: Arc::new(self.at.permuted(Some(order), Some(&pos))),
+            a: Arc::new(self.a.permuted(Some(order), Some(&pos), arg)?),
+            at: Arc::new(self.at.permuted(Some(order), Some(&pos), arg)?),
             k: self.k,
         })
     }
 
     pub fn vertices(&self) -> usize {
-        self.a.rows
+        self.a.rows()
     }
 
     /// Values of the stored terms T_1 … T_{K−2} the forward pass leaves for the backward pass.
     pub fn terms_len(&self, batch: usize, c_in: usize) -> usize {
-        self.k.saturating_sub(2) * self.a.rows * batch * c_in
+        self.k.saturating_sub(2) * self.a.rows() * batch * c_in
     }
 
     fn shape(&self, d: ConvDims) -> ChebShape {
         ChebShape {
             batch: d.batch,
-            v: self.a.rows,
+            v: self.a.rows(),
             ci: d.c_in,
             co: d.c_out,
             k: self.k,
@@ -200,7 +202,7 @@ impl ChebKernel {
     }
 
     fn check(&self, op: &'static str, d: ConvDims, x: usize, w: usize, terms: usize) -> Result<()> {
-        let v = self.a.rows;
+        let v = self.a.rows();
         check_len(op, "x", x, v * d.c_in * d.batch)?;
         check_len(op, "w", w, d.c_in * self.k * d.c_out)?;
         check_len(op, "terms", terms, self.terms_len(d.batch, d.c_in))
@@ -218,10 +220,10 @@ impl ChebKernel {
     ) -> Result<()> {
         const OP: &str = "ChebKernel::forward";
         self.check(OP, d, x.len(), w.len(), terms.len())?;
-        check_len(OP, "y", y.len(), self.a.rows * d.c_out * d.batch)?;
+        check_len(OP, "y", y.len(), self.a.rows() * d.c_out * d.batch)?;
         let s = self.shape(d);
         let xb = Blocks::channel_major(x, d.batch, d.c_in);
-        let mut outs: Vec<&mut [T]> = split_terms(terms, self.k, self.a.rows * d.batch * d.c_in);
+        let mut outs: Vec<&mut [T]> = split_terms(terms, self.k, self.a.rows() * d.batch * d.c_in);
         cheb_kernel::stored_terms_into(&self.a, xb, &s, &mut outs);
         let refs: Vec<&[T]> = outs.into_iter().map(|t| &*t).collect();
         cheb_kernel::mix_terms(&self.a, xb, &refs, w, None, &s, (Io::VertexChannel, y));
@@ -244,8 +246,8 @@ impl ChebKernel {
     ) -> Result<()> {
         const OP: &str = "ChebKernel::backward";
         self.check(OP, d, x.len(), w.len(), terms.len())?;
-        let size = self.a.rows * d.c_in * d.batch;
-        check_len(OP, "g", g.len(), self.a.rows * d.c_out * d.batch)?;
+        let size = self.a.rows() * d.c_in * d.batch;
+        check_len(OP, "g", g.len(), self.a.rows() * d.c_out * d.batch)?;
         check_len(OP, "dw", dw.len(), w.len())?;
         if let Some((dx, work)) = &dx {
             check_len(OP, "dx", dx.len(), size)?;
@@ -318,9 +320,9 @@ impl MaxPool {
     ) -> Result<()> {
         const OP: &str = "MaxPool::forward_into";
         let p = self.pattern();
-        check_len(OP, "x", x.len(), p.cols * n)?;
-        check_len(OP, "y", y.len(), p.rows * n)?;
-        check_len(OP, "arg", arg.len(), p.rows * n)?;
+        check_len(OP, "x", x.len(), p.cols() * n)?;
+        check_len(OP, "y", y.len(), p.rows() * n)?;
+        check_len(OP, "arg", arg.len(), p.rows() * n)?;
         max_pool(p, x, y, arg, n, self.mode());
         Ok(())
     }
@@ -337,9 +339,9 @@ impl MaxPool {
     ) -> Result<()> {
         const OP: &str = "MaxPool::backward_into";
         let p = self.pattern();
-        check_len(OP, "g", g.len(), p.rows * n)?;
-        check_len(OP, "arg", arg.len(), p.rows * n)?;
-        check_len(OP, "dx", dx.len(), p.cols * n)?;
+        check_len(OP, "g", g.len(), p.rows() * n)?;
+        check_len(OP, "arg", arg.len(), p.rows() * n)?;
+        check_len(OP, "dx", dx.len(), p.cols() * n)?;
         max_unpool(self.pattern_t(), arg, g, dx, n);
         Ok(())
     }

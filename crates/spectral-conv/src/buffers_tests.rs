@@ -356,7 +356,7 @@ fn graph_pool_timing_probe() {
     let survivors: Vec<u32> = (0..rows * half)
         .map(|c| ((c / half) * cols + (c % half) * 2) as u32)
         .collect();
-    let members = mesh_hierarchy::graph::neighbourhoods(&faces, &survivors, &cluster_of).unwrap();
+    let members = crate::test_util::neighbourhoods(&faces, &survivors, &cluster_of);
     let m = members.rows();
     let n = 288;
     let x: Vec<f32> = random_vec(v * n, 1).iter().map(|&a| a as f32).collect();

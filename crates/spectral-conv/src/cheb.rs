@@ -268,11 +268,9 @@ mod tests {
     use crate::spmm::Backend;
     use crate::test_util::*;
     use candle_core::{DType, Device, Var};
-    use mesh_hierarchy::{LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian};
 
-    fn grid_laplacian(n: usize, m: usize) -> mesh_hierarchy::CsrMatrix {
-        let adj = adjacency(n * m, &grid_faces(n, m));
-        rescaled_laplacian(&normalized_laplacian(&adj), LambdaMax::Two)
+    fn grid_laplacian(n: usize, m: usize) -> sparse_csr::CsrMatrix {
+        mesh_laplacian(n * m, &grid_faces(n, m))
     }
 
     fn layer(op: &SparseOp, k: usize, ci: usize, co: usize, bias: bool, seed: u64) -> ChebConv {

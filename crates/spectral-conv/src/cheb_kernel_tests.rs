@@ -4,7 +4,7 @@ use crate::cheb_kernel::{ChebShape, Need, backward, forward};
 use crate::kernel::Csr;
 use crate::layout::{Blocks, Io, to_channel_major};
 use crate::test_util::{dense_apply, random_matrix, random_vec};
-use mesh_hierarchy::CsrMatrix;
+use sparse_csr::CsrMatrix;
 
 /// Σ_k T_k(A) x W_k + b by dense recurrences on `[B, V, C]`, W in the authors' layout.
 fn reference(m: &CsrMatrix, x: &[f64], w: &[f64], b: &[f64], s: &ChebShape) -> Vec<f64> {

@@ -61,10 +61,10 @@ impl ChebOp {
             Io::VertexBatch => (d1, d0, d2),
             Io::VertexChannel => (d2, d0, d1),
         };
-        if v != self.a.rows || rows != ci * self.k {
+        if v != self.a.rows() || rows != ci * self.k {
             candle_core::bail!(
                 "cheb-conv: input {x_dims:?} and weight {w_dims:?} do not fit {} vertices, K = {}",
-                self.a.rows,
+                self.a.rows(),
                 self.k
             );
         }

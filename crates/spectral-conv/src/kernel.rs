@@ -16,9 +16,10 @@
 //! SIMD: the hot per-chunk functions are compiled twice ([`multiversion`]): for AVX2 + FMA, used
 //! when the CPU has them, and for the baseline target.
 
+use crate::error::{ConvError, Result};
 use crate::layout::{ChunkOut, Io, chunk_outs, to_channel_major};
-use mesh_hierarchy::CsrMatrix;
 use rayon::prelude::*;
+use sparse_csr::CsrMatrix;
 use std::ops::{Add, AddAssign, Mul, Sub};
 
 /// Vertices per rayon task: a chunk's staging buffers (64 × 288 floats each at B = 32, C = 9)
@@ -98,6 +99,7 @@ impl Real for f32 {
     fn mul_add(self, a: Self, b: Self) -> Self {
         f32::mul_add(self, a, b)
     }
+    #[inline(always)]
     fn values(csr: &Csr) -> &[Self] {
         &csr.values_f32
     }
@@ -150,8 +152,9 @@ impl Real for f64 {
     fn mul_add(self, a: Self, b: Self) -> Self {
         f64::mul_add(self, a, b)
     }
+    #[inline(always)]
     fn values(csr: &Csr) -> &[Self] {
-        &csr.values_f64
+        csr.matrix.values()
     }
     fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
         &crate::scratch::POOL_F64
@@ -239,72 +242,82 @@ pub(crate) fn baseline_forced() -> bool {
     }
 }
 
-/// A sparse matrix as the kernels read it: the pattern once, the values in both precisions
-/// (converted once at construction, never per call).
+/// A sparse matrix as the kernels read it: the [`CsrMatrix`] (pattern and f64 values) and its
+/// values in f32, converted once at construction, never per call (`values_f32[e]` is always
+/// `values()[e] as f32`).
 #[derive(Debug)]
 pub struct Csr {
-    pub rows: usize,
-    pub cols: usize,
-    pub indptr: Vec<usize>,
-    pub indices: Vec<u32>,
-    pub values_f32: Vec<f32>,
-    pub values_f64: Vec<f64>,
+    matrix: CsrMatrix,
+    values_f32: Vec<f32>,
 }
 
 impl Csr {
     pub fn from_matrix(m: &CsrMatrix) -> Self {
+        Self::new(m.clone())
+    }
+
+    fn new(matrix: CsrMatrix) -> Self {
         Self {
-            rows: m.rows(),
-            cols: m.cols(),
-            indptr: m.indptr().to_vec(),
-            indices: m.indices().to_vec(),
-            values_f32: m.values().iter().map(|&v| v as f32).collect(),
-            values_f64: m.values().to_vec(),
+            values_f32: matrix.values().iter().map(|&v| v as f32).collect(),
+            matrix,
         }
     }
 
+    #[inline(always)]
+    pub fn rows(&self) -> usize {
+        self.matrix.rows()
+    }
+
+    #[inline(always)]
+    pub fn cols(&self) -> usize {
+        self.matrix.cols()
+    }
+
     pub fn nnz(&self) -> usize {
-        self.indices.len()
+        self.matrix.nnz()
+    }
+
+    /// The column indices of row `r` (the pattern alone).
+    pub fn columns(&self, r: usize) -> &[u32] {
+        self.matrix.row(r).0
+    }
+
+    /// The column of every non-zero, row after row.
+    pub fn indices(&self) -> &[u32] {
+        self.matrix.indices()
+    }
+
+    pub fn values_f32(&self) -> &[f32] {
+        &self.values_f32
+    }
+
+    pub fn values_f64(&self) -> &[f64] {
+        self.matrix.values()
     }
 
     /// Row `r` as (columns, values).
     #[inline(always)]
     pub fn row<T: Real>(&self, r: usize) -> (&[u32], &[T]) {
-        let span = self.indptr[r]..self.indptr[r + 1];
-        (&self.indices[span.clone()], &T::values(self)[span])
+        let indptr = self.matrix.indptr();
+        let span = indptr[r]..indptr[r + 1];
+        (&self.matrix.indices()[span.clone()], &T::values(self)[span])
     }
 
-    /// The matrix with renumbered rows and columns: row p of the result is row `rows[p]` of
-    /// this one, and column `c` becomes the position of `c` in the column order (`col_pos`,
-    /// the inverse of that order). `None` keeps the numbering. Each row's entries are sorted
-    /// by their new column.
-    pub fn permuted(&self, rows: Option<&[u32]>, col_pos: Option<&[u32]>) -> Self {
-        let mut out = Self {
-            rows: self.rows,
-            cols: self.cols,
-            indptr: Vec::with_capacity(self.rows + 1),
-            indices: Vec::with_capacity(self.nnz()),
-            values_f32: Vec::with_capacity(self.nnz()),
-            values_f64: Vec::with_capacity(self.nnz()),
-        };
-        out.indptr.push(0);
-        let mut entries: Vec<(u32, usize)> = Vec::new();
-        for p in 0..self.rows {
-            let r = rows.map_or(p, |o| o[p] as usize);
-            entries.clear();
-            entries.extend((self.indptr[r]..self.indptr[r + 1]).map(|e| {
-                let c = self.indices[e];
-                (col_pos.map_or(c, |pos| pos[c as usize]), e)
-            }));
-            entries.sort_unstable();
-            for &(c, e) in &entries {
-                out.indices.push(c);
-                out.values_f32.push(self.values_f32[e]);
-                out.values_f64.push(self.values_f64[e]);
-            }
-            out.indptr.push(out.indices.len());
-        }
-        out
+    /// The matrix with renumbered rows and columns ([`CsrMatrix::permuted`]): row p of the result
+    /// is row `rows[p]` of this one, and column `c` becomes the position of `c` in the column
+    /// order (`col_pos`, the inverse of that order). `None` keeps the numbering. Each row's
+    /// entries are sorted by their new column. Errors: orders that are not permutations.
+    pub fn permuted(
+        &self,
+        rows: Option<&[u32]>,
+        col_pos: Option<&[u32]>,
+        (op, arg): (&'static str, &'static str),
+    ) -> Result<Self> {
+        let matrix = self
+            .matrix
+            .permuted(rows, col_pos)
+            .map_err(|e| ConvError::argument(op, arg, e.to_string()))?;
+        Ok(Self::new(matrix))
     }
 }
 
@@ -402,7 +415,7 @@ pub(crate) fn spmm_axpby<T: Real>(
     out: &mut [T],
     n: usize,
 ) {
-    if n == 0 || a.rows == 0 {
+    if n == 0 || a.rows() == 0 {
         return;
     }
     out.par_chunks_mut(CHUNK_ROWS * n)
@@ -468,13 +481,13 @@ pub(crate) fn load_chunk<T: Real>(
 /// y = A x for x `[B, A.cols, c]`, returning `[B, A.rows, c]` (through a channel-major copy of
 /// x when B > 1; for B = 1 the layouts coincide and the rows are gathered directly).
 pub(crate) fn spmm_batch_major<T: Real>(a: &Csr, x: &[T], batch: usize, c: usize) -> Vec<T> {
-    let mut y = vec![T::ZERO; batch * a.rows * c];
+    let mut y = vec![T::ZERO; batch * a.rows() * c];
     if batch <= 1 {
         spmm_axpby(a, T::from_f64(1.0), x, T::ZERO, None, &mut y, c);
         return y;
     }
-    let xcm = to_channel_major(x, Io::BatchMajor, (batch, a.cols, c));
-    chunk_outs(&mut y, Io::BatchMajor, (batch, a.rows, c))
+    let xcm = to_channel_major(x, Io::BatchMajor, (batch, a.cols(), c));
+    chunk_outs(&mut y, Io::BatchMajor, (batch, a.rows(), c))
         .into_par_iter()
         .enumerate()
         .for_each_init(Staging::new, |staging, (chunk, dest)| {
@@ -504,7 +517,7 @@ fn gather_chunk_body<T: Real, M: Madd>(
     mut dest: ChunkOut<'_, T>,
     staging: &mut Staging<T>,
 ) {
-    let (i0, cnt) = chunk_span(chunk, a.rows);
+    let (i0, cnt) = chunk_span(chunk, a.rows());
     let [blocks, _, _] = staging.get([cnt * n, 0, 0]);
     for (li, acc) in blocks.chunks_exact_mut(n).enumerate() {
         let (cols, vals) = a.row::<T>(i0 + li);

@@ -1,8 +1,9 @@
 //! # spectral-conv: graph convolution and pooling on meshes as candle ops
 //!
-//! **In:** fixed sparse operators from `mesh-hierarchy` ([`CsrMatrix`]: a rescaled Laplacian
-//! L̃, pooling, de-pooling or sampling matrices) and batches of per-vertex features as candle
-//! tensors `[B, V, C]` (or `[V, C]`), f32 or f64.
+//! **In:** fixed sparse operators as [`CsrMatrix`] (of the `sparse-csr` crate, re-exported here:
+//! a rescaled Laplacian L̃, pooling, de-pooling or sampling matrices, as `mesh-hierarchy` builds
+//! them from a mesh, though this crate does not depend on it) and batches of per-vertex features
+//! as candle tensors `[B, V, C]` (or `[V, C]`), f32 or f64.
 //! **Out:** differentiable layers: [`SparseOp`] (y = A x), [`ChebConv`]
 //! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`MeanPool`],
 //! [`DePool`], [`Sampling`] and [`MaxPool`] (signed largest magnitude per cluster, or with
@@ -33,13 +34,21 @@
 //! ```
 //! use candle_core::{DType, Device, Tensor};
 //! use candle_nn::{VarBuilder, VarMap};
-//! use mesh_hierarchy::{LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian};
-//! use spectral_conv::{ChebConfig, ChebConv, SparseOp};
+//! use spectral_conv::{ChebConfig, ChebConv, CsrMatrix, SparseOp};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! // A square of two triangles; L̃ = 2L/λmax − I with λmax = 2, as the authors.
-//! let faces = [[0u32, 1, 2], [0, 2, 3]];
-//! let l = rescaled_laplacian(&normalized_laplacian(&adjacency(4, &faces)), LambdaMax::Two);
+//! // A square of two triangles 0-1-2, 0-2-3. With the normalised Laplacian
+//! // L = I − D^-1/2 A D^-1/2 and λmax = 2, as the authors, L̃ = 2L/λmax − I = −D^-1/2 A D^-1/2
+//! // (`mesh-hierarchy` builds it for any mesh:
+//! // `rescaled_laplacian(&normalized_laplacian(&adjacency(v, faces)), LambdaMax::Two)`).
+//! let edges = [(0u32, 1u32), (1, 2), (2, 0), (2, 3), (3, 0)];
+//! let degree = [3.0f64, 2.0, 3.0, 2.0];
+//! let entries: Vec<(u32, u32, f64)> = edges
+//!     .iter()
+//!     .flat_map(|&(i, j)| [(i, j), (j, i)])
+//!     .map(|(i, j)| (i, j, -1.0 / (degree[i as usize] * degree[j as usize]).sqrt()))
+//!     .collect();
+//! let l = CsrMatrix::from_triplets(4, 4, &entries)?;
 //! let device = Device::Cpu;
 //! let laplacian = SparseOp::new(&l, &device)?;
 //! let vars = VarMap::new();
@@ -80,9 +89,9 @@ pub use buffers::{ChebKernel, ConvDims, Float, SparseKernel};
 pub use cheb::{ChebConfig, ChebConv};
 pub use error::{ConvError, Result};
 pub use max_kernel::MaxMode;
-pub use mesh_hierarchy::CsrMatrix;
 pub use order::{inverse_order, locality_order, permute_symmetric};
 pub use pool::{DePool, MaxPool, MeanPool, Sampling};
 pub use scratch::release_scratch;
+pub use sparse_csr::CsrMatrix;
 pub use spatial::{SpatialConfig, SpatialConv, neighbour_mean_matrix};
 pub use spmm::{Backend, SparseOp};

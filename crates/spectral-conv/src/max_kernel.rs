@@ -41,7 +41,7 @@ fn max_pool_with<T: Real, const SIGNED: bool>(
     arg: &mut [u32],
     c: usize,
 ) {
-    if c == 0 || pattern.rows == 0 {
+    if c == 0 || pattern.rows() == 0 {
         return;
     }
     out.par_chunks_mut(CHUNK_ROWS * c)
@@ -109,7 +109,7 @@ fn max_chunk<T: Real, const SIGNED: bool>(
     arg: &mut [u32],
     c: usize,
 ) {
-    let (rows, cols) = (pattern.rows, pattern.cols);
+    let (rows, cols) = (pattern.rows(), pattern.cols());
     for (local, (y, am)) in out
         .chunks_exact_mut(c)
         .zip(arg.chunks_exact_mut(c))
@@ -188,7 +188,7 @@ fn select_block<T: Real, const SIGNED: bool, const L: usize>(
 /// g whose selection it might be, so chunks of vertices run in parallel without sharing a
 /// value, the sums do not depend on the thread count, and the compare-and-add vectorises.
 pub(crate) fn max_unpool<T: Real>(members_t: &Csr, arg: &[u32], g: &[T], dx: &mut [T], c: usize) {
-    let (cols, rows) = (members_t.rows, members_t.cols);
+    let (cols, rows) = (members_t.rows(), members_t.cols());
     if c == 0 || cols == 0 {
         return;
     }
@@ -231,7 +231,7 @@ fn unpool_row_body<T: Real, M: Madd>(holders: &[u32], g: &[T], arg: &[u32], j: u
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mesh_hierarchy::CsrMatrix;
+    use sparse_csr::CsrMatrix;
 
     #[test]
     fn max_pool_picks_signed_largest_magnitude_and_unpool_scatters() {

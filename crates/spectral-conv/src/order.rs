@@ -9,7 +9,7 @@
 //! within a narrow band of indices.
 
 use crate::error::{ConvError, Result};
-use mesh_hierarchy::CsrMatrix;
+use sparse_csr::CsrMatrix;
 use std::collections::VecDeque;
 
 /// The reverse Cuthill–McKee order of a square matrix's pattern (symmetrised): `order[p]` is the
@@ -160,8 +160,7 @@ pub(crate) fn positions(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{Rng, grid_faces};
-    use mesh_hierarchy::adjacency;
+    use crate::test_util::{Rng, adjacency, grid_faces};
 
     /// The largest |position(i) − position(j)| over the edges.
     fn bandwidth(adj: &CsrMatrix, position: &[u32]) -> u32 {

@@ -17,7 +17,7 @@ use crate::max_kernel::{MaxMode, max_pool, max_unpool};
 use crate::spmm::{Backend, SparseOp, contiguous_span, use_kernel};
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Storage, Tensor};
-use mesh_hierarchy::CsrMatrix;
+use sparse_csr::CsrMatrix;
 use std::sync::{Arc, Mutex};
 
 macro_rules! sparse_layer {
@@ -118,16 +118,16 @@ impl MaxPool {
             ));
         }
         let pattern = Csr::from_matrix(pooling);
-        let rows = pattern.rows;
+        let rows = pattern.rows();
         let width = (0..rows)
-            .map(|r| pattern.indptr[r + 1] - pattern.indptr[r])
+            .map(|r| pattern.columns(r).len())
             .max()
             .unwrap_or(0)
             .max(1);
         let mut members = Vec::with_capacity(rows * width);
         let mut nonempty = Vec::with_capacity(rows);
         for r in 0..rows {
-            let cols = &pattern.indices[pattern.indptr[r]..pattern.indptr[r + 1]];
+            let cols = pattern.columns(r);
             let pad = cols.first().copied().unwrap_or(0);
             members.extend(
                 cols.iter()
@@ -199,14 +199,14 @@ impl MaxPool {
                 ));
             }
         };
-        if x3.dim(1)? != self.pattern.cols || !x.dtype().is_float() {
+        if x3.dim(1)? != self.pattern.cols() || !x.dtype().is_float() {
             return Err(ConvError::input(
                 OP,
                 format!(
                     "input {:?} of {:?}; expected {} vertices of a float dtype",
                     x.dims(),
                     x.dtype(),
-                    self.pattern.cols
+                    self.pattern.cols()
                 ),
             ));
         }
@@ -246,7 +246,7 @@ impl MaxPool {
         let v = x.dim(0)?;
         let y = self.forward_with(&x.reshape((1, v, x.elem_count() / v))?, self.backend)?;
         let mut dims = x.dims().to_vec();
-        dims[0] = self.pattern.rows;
+        dims[0] = self.pattern.rows();
         Ok(y.reshape(dims)?)
     }
 
@@ -256,7 +256,7 @@ impl MaxPool {
     /// gather it (differentiable).
     fn fallback(&self, x: &Tensor) -> Result<Tensor> {
         let (batch, _, c) = x.dims3()?;
-        let rows = self.pattern.rows;
+        let rows = self.pattern.rows();
         let grouped = x
             .index_select(&self.members, 1)?
             .reshape((batch, rows, self.width, c))?;
@@ -291,19 +291,19 @@ impl MaxPoolOp {
         let &[batch, v, c] = dims else {
             candle_core::bail!("max-pool: expected a rank-3 input, got {dims:?}");
         };
-        if v != self.pattern.cols {
+        if v != self.pattern.cols() {
             candle_core::bail!(
                 "max-pool: {v} vertices, the pooling has {}",
-                self.pattern.cols
+                self.pattern.cols()
             );
         }
-        let n = batch * self.pattern.rows * c;
+        let n = batch * self.pattern.rows() * c;
         let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
         max_pool(&self.pattern, x, &mut y, &mut arg, c, self.mode);
         if let Ok(mut saved) = self.arg.lock() {
             *saved = Some(Arc::new(arg));
         }
-        Ok((y, Shape::from((batch, self.pattern.rows, c))))
+        Ok((y, Shape::from((batch, self.pattern.rows(), c))))
     }
 
     fn unpool<T: Real + candle_core::WithDType>(
@@ -322,7 +322,7 @@ impl MaxPoolOp {
                 };
                 let (lo, hi) = contiguous_span("max-pool", layout)?;
                 let xs = &T::cpu_storage_as_slice(cpu)?[lo..hi];
-                let n = batch * self.pattern.rows * c;
+                let n = batch * self.pattern.rows() * c;
                 let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
                 max_pool(&self.pattern, xs, &mut y, &mut arg, c, self.mode);
                 Arc::new(arg)
@@ -496,7 +496,7 @@ mod tests {
         let faces = grid_faces(6, 6);
         let cluster_of: Vec<u32> = (0..36u32).map(|v| (v / 6 / 2) * 3 + (v % 6) / 2).collect();
         let survivors: Vec<u32> = (0..9u32).map(|c| (c / 3) * 12 + (c % 3) * 2).collect();
-        mesh_hierarchy::graph::neighbourhoods(&faces, &survivors, &cluster_of).unwrap()
+        neighbourhoods(&faces, &survivors, &cluster_of)
     }
 
     #[test]

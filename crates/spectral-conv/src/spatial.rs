@@ -8,7 +8,7 @@ use crate::error::{ConvError, Result};
 use crate::spmm::SparseOp;
 use candle_core::Tensor;
 use candle_nn::{Init, VarBuilder};
-use mesh_hierarchy::CsrMatrix;
+use sparse_csr::CsrMatrix;
 
 /// D⁻¹A: row i holds 1/|N(i)| at each neighbour j ≠ i of the adjacency pattern (its values are
 /// ignored, so a weighted adjacency works too). A vertex without neighbours gets an empty row,
@@ -233,7 +233,6 @@ mod tests {
     use crate::spmm::Backend;
     use crate::test_util::*;
     use candle_core::{DType, Device, Var};
-    use mesh_hierarchy::adjacency;
 
     #[test]
     fn neighbour_mean_averages_the_one_ring() {

@@ -13,7 +13,7 @@ use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real, spmm_batch_major};
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Tensor};
-use mesh_hierarchy::CsrMatrix;
+use sparse_csr::CsrMatrix;
 use std::sync::Arc;
 
 /// Which implementation a sparse product (and the layers built on it) uses.
@@ -51,14 +51,14 @@ struct Inner {
 impl Inner {
     fn build(a: Arc<Csr>, at: Arc<Csr>, device: &Device) -> Result<Self> {
         let nnz = a.nnz();
-        let row_of: Vec<u32> = (0..a.rows)
-            .flat_map(|r| std::iter::repeat_n(r as u32, a.indptr[r + 1] - a.indptr[r]))
+        let row_of: Vec<u32> = (0..a.rows())
+            .flat_map(|r| std::iter::repeat_n(r as u32, a.columns(r).len()))
             .collect();
         Ok(Self {
             rows_idx: Tensor::from_vec(row_of, nnz, device)?,
-            cols_idx: Tensor::from_slice(&a.indices, nnz, device)?,
-            values_f32: Tensor::from_slice(&a.values_f32, (1, nnz, 1), device)?,
-            values_f64: Tensor::from_slice(&a.values_f64, (1, nnz, 1), device)?,
+            cols_idx: Tensor::from_slice(a.indices(), nnz, device)?,
+            values_f32: Tensor::from_slice(a.values_f32(), (1, nnz, 1), device)?,
+            values_f64: Tensor::from_slice(a.values_f64(), (1, nnz, 1), device)?,
             a,
             at,
             device: device.clone(),
@@ -103,12 +103,12 @@ impl SparseOp {
 
     /// Rows of A: the vertex count of the output.
     pub fn rows(&self) -> usize {
-        self.inner.a.rows
+        self.inner.a.rows()
     }
 
     /// Columns of A: the vertex count the input must have.
     pub fn cols(&self) -> usize {
-        self.inner.a.cols
+        self.inner.a.cols()
     }
 
     pub fn nnz(&self) -> usize {
@@ -286,14 +286,14 @@ impl SpmmOp {
         let &[batch, v, c] = dims else {
             candle_core::bail!("csr-spmm: expected a rank-3 input, got {dims:?}");
         };
-        if v != self.a.cols {
+        if v != self.a.cols() {
             candle_core::bail!(
                 "csr-spmm: {v} vertices, the matrix has {} columns",
-                self.a.cols
+                self.a.cols()
             );
         }
         let y = spmm_batch_major(&self.a, x, batch, c);
-        Ok((y, Shape::from((batch, self.a.rows, c))))
+        Ok((y, Shape::from((batch, self.a.rows(), c))))
     }
 }
 

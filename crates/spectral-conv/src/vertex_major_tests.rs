@@ -5,7 +5,7 @@
 use crate::test_util::*;
 use crate::{Backend, ChebConv, DePool, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv};
 use candle_core::{DType, Device, Tensor, Var};
-use mesh_hierarchy::{CsrMatrix, adjacency};
+use sparse_csr::CsrMatrix;
 
 /// `[B, V, C]` ↔ `[V, B, C]` (contiguous).
 fn swap(t: &Tensor) -> Tensor {
@@ -89,10 +89,7 @@ fn cheb_vertex_major_matches_batch_major_and_the_fallback() {
 #[test]
 fn cheb_vertex_major_gradients_match_finite_differences() {
     let faces = grid_faces(4, 5);
-    let l = mesh_hierarchy::rescaled_laplacian(
-        &mesh_hierarchy::normalized_laplacian(&adjacency(20, &faces)),
-        mesh_hierarchy::LambdaMax::Two,
-    );
+    let l = mesh_laplacian(20, &faces);
     let op = SparseOp::new(&l, &Device::Cpu).unwrap();
     for (k, ci, co, batch) in [(1, 3, 2, 3), (2, 2, 3, 1), (3, 3, 2, 3), (5, 2, 2, 2)] {
         let x =
@@ -337,10 +334,7 @@ fn sparse_layers_and_pools_vertex_major_match_batch_major() {
 fn timing_probe() {
     let n = 205;
     let v = n * n;
-    let l = mesh_hierarchy::rescaled_laplacian(
-        &mesh_hierarchy::normalized_laplacian(&adjacency(v, &grid_faces(n, n))),
-        mesh_hierarchy::LambdaMax::Two,
-    );
+    let l = mesh_laplacian(v, &grid_faces(n, n));
     let op = SparseOp::new(&l, &Device::Cpu).unwrap();
     let w = Var::from_tensor(
         &(tensor(random_vec(27 * 9, 1), &[27, 9])

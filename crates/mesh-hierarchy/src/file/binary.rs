@@ -4,12 +4,12 @@ use super::{FORMAT, VERSION};
 use crate::error::HierarchyError;
 use crate::hierarchy::{Hierarchy, HierarchyConfig, Level};
 use crate::pooling::{Pooler, PoolingOp};
-use crate::sparse::CsrMatrix;
 use mesh_io::MeshIoError;
 use mesh_io::stamped::{
     Dtype, Entry, Stamp, StampedFile, f32_bytes, f64_bytes, read_stamped, write_stamped,
 };
 use serde::{Deserialize, Serialize};
+use sparse_csr::CsrMatrix;
 use std::path::Path;
 
 const STAMP: Stamp = Stamp {

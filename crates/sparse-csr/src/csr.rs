@@ -1,5 +1,6 @@
-//! `CsrMatrix`: the compressed-sparse-row matrix every operator of a hierarchy is stored as
-//! (Laplacians, pooling, de-pooling). Values are f64; consumers convert once.
+//! [`CsrMatrix`]: a compressed-sparse-row matrix with f64 values, checked on construction.
+//! Every operator of a mesh hierarchy is stored as one (Laplacians, pooling, de-pooling);
+//! consumers that need another precision convert once.
 
 use serde::{Deserialize, Serialize};
 
@@ -35,13 +36,15 @@ impl CsrMatrix {
             indices,
             values,
         };
-        m.check()?;
+        m.validate()?;
         Ok(m)
     }
 
-    /// Checks every invariant of [`CsrMatrix::new`]; a deserialised matrix has not been
-    /// through it.
-    pub(crate) fn check(&self) -> Result<(), CsrError> {
+    /// Checks every invariant of [`CsrMatrix::new`]: `indptr` has `rows + 1` entries from 0 to
+    /// `nnz`, never decreasing; each row's columns are strictly increasing and below `cols`;
+    /// every value is finite. A deserialised matrix has not been through `new`: call this on
+    /// it before use.
+    pub fn validate(&self) -> Result<(), CsrError> {
         let (rows, cols) = (self.rows, self.cols);
         let (indptr, indices, values) = (&self.indptr, &self.indices, &self.values);
         if Some(indptr.len()) != rows.checked_add(1) || indptr[0] != 0 {
@@ -124,31 +127,38 @@ impl CsrMatrix {
         }
     }
 
+    #[inline]
     pub fn rows(&self) -> usize {
         self.rows
     }
 
+    #[inline]
     pub fn cols(&self) -> usize {
         self.cols
     }
 
+    #[inline]
     pub fn nnz(&self) -> usize {
         self.values.len()
     }
 
+    #[inline]
     pub fn indptr(&self) -> &[usize] {
         &self.indptr
     }
 
+    #[inline]
     pub fn indices(&self) -> &[u32] {
         &self.indices
     }
 
+    #[inline]
     pub fn values(&self) -> &[f64] {
         &self.values
     }
 
     /// Row `r` as (columns, values).
+    #[inline]
     pub fn row(&self, r: usize) -> (&[u32], &[f64]) {
         let span = self.indptr[r]..self.indptr[r + 1];
         (&self.indices[span.clone()], &self.values[span])
@@ -183,6 +193,65 @@ impl CsrMatrix {
             indices,
             values,
         }
+    }
+
+    /// The matrix with renumbered rows and columns: row p of the result is row `rows[p]` of
+    /// this one, and column `c` becomes `col_pos[c]` (the position of `c` in the new column
+    /// order, i.e. the inverse of that order). `None` keeps a side's numbering. Each row's
+    /// entries are sorted by their new column; values are moved, never recomputed.
+    ///
+    /// Errors: `rows` not `self.rows()` long or naming a row beyond; `col_pos` not
+    /// `self.cols()` long, or sending a column beyond `cols` or two columns of one row to the
+    /// same position (a permutation of each side never does).
+    pub fn permuted(
+        &self,
+        rows: Option<&[u32]>,
+        col_pos: Option<&[u32]>,
+    ) -> Result<Self, CsrError> {
+        if let Some(o) = rows {
+            if o.len() != self.rows {
+                return Err(CsrError(format!(
+                    "row order has {} entries for {} rows",
+                    o.len(),
+                    self.rows
+                )));
+            }
+            if let Some(&r) = o.iter().find(|&&r| r as usize >= self.rows) {
+                return Err(CsrError(format!(
+                    "row order names row {r}, beyond {}",
+                    self.rows
+                )));
+            }
+        }
+        if let Some(pos) = col_pos
+            && pos.len() != self.cols
+        {
+            return Err(CsrError(format!(
+                "column positions have {} entries for {} columns",
+                pos.len(),
+                self.cols
+            )));
+        }
+        let mut indptr = Vec::with_capacity(self.rows + 1);
+        let mut indices = Vec::with_capacity(self.nnz());
+        let mut values = Vec::with_capacity(self.nnz());
+        indptr.push(0);
+        let mut entries: Vec<(u32, usize)> = Vec::new();
+        for p in 0..self.rows {
+            let r = rows.map_or(p, |o| o[p] as usize);
+            entries.clear();
+            entries.extend((self.indptr[r]..self.indptr[r + 1]).map(|e| {
+                let c = self.indices[e];
+                (col_pos.map_or(c, |pos| pos[c as usize]), e)
+            }));
+            entries.sort_unstable();
+            for &(c, e) in &entries {
+                indices.push(c);
+                values.push(self.values[e]);
+            }
+            indptr.push(indices.len());
+        }
+        Self::new(self.rows, self.cols, indptr, indices, values)
     }
 
     /// y = A x for one column vector.
@@ -243,5 +312,77 @@ mod tests {
         assert_eq!(a.mul_vec(&[1.0, 2.0, 3.0]), vec![5.0, 9.0, 11.0]);
         assert!(CsrMatrix::from_triplets(2, 2, &[(2, 0, 1.0)]).is_err());
         assert!(CsrMatrix::new(1, 2, vec![0, 2], vec![1, 0], vec![1.0, 1.0]).is_err());
+    }
+
+    #[test]
+    fn validate_rejects_what_new_rejects() {
+        // As a deserialised matrix would arrive: built without `new`.
+        let raw = |indptr: Vec<usize>, indices: Vec<u32>, values: Vec<f64>| CsrMatrix {
+            rows: 2,
+            cols: 3,
+            indptr,
+            indices,
+            values,
+        };
+        assert!(
+            raw(vec![0, 1, 2], vec![2, 0], vec![1.0, -1.0])
+                .validate()
+                .is_ok()
+        );
+        for bad in [
+            raw(vec![0, 1], vec![2], vec![1.0]), // indptr too short
+            raw(vec![1, 1, 2], vec![2, 0], vec![1.0, -1.0]), // indptr not from 0
+            raw(vec![0, 2, 1], vec![2, 0], vec![1.0, -1.0]), // indptr decreases
+            raw(vec![0, 1, 2], vec![2, 0], vec![1.0]), // lengths disagree
+            raw(vec![0, 2, 2], vec![2, 0], vec![1.0, -1.0]), // unsorted row
+            raw(vec![0, 2, 2], vec![1, 1], vec![1.0, -1.0]), // repeated column
+            raw(vec![0, 1, 2], vec![3, 0], vec![1.0, -1.0]), // column out of range
+            raw(vec![0, 1, 2], vec![2, 0], vec![f64::NAN, -1.0]), // non-finite value
+            raw(vec![0, 1, 2], vec![2, 0], vec![1.0, f64::INFINITY]), // non-finite value
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
+        let e = raw(vec![0, 2, 2], vec![1, 1], vec![1.0, -1.0])
+            .validate()
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid sparse matrix: row 0 has unsorted or repeated columns"
+        );
+    }
+
+    #[test]
+    fn permuted_renumbers_rows_and_columns_and_moves_values() {
+        let t = [
+            (0, 1, 2.0),
+            (0, 3, 5.0),
+            (1, 0, -1.0),
+            (2, 2, 4.0),
+            (2, 3, 0.5),
+        ];
+        let a = CsrMatrix::from_triplets(3, 4, &t).unwrap();
+        let rows = [2u32, 0, 1];
+        let order = [3u32, 1, 0, 2]; // new column q holds old column order[q]
+        let mut col_pos = [0u32; 4];
+        for (q, &c) in order.iter().enumerate() {
+            col_pos[c as usize] = q as u32;
+        }
+        let p = a.permuted(Some(&rows), Some(&col_pos)).unwrap();
+        let (dense, pdense) = (a.to_dense(), p.to_dense());
+        for i in 0..3 {
+            for q in 0..4 {
+                assert_eq!(pdense[i][q], dense[rows[i] as usize][order[q] as usize]);
+            }
+        }
+        assert_eq!(p.row(0), (&[0u32, 3][..], &[0.5, 4.0][..]));
+        assert_eq!(p.nnz(), a.nnz());
+        assert_eq!(a.permuted(None, None).unwrap(), a);
+        assert_eq!(a.permuted(Some(&[0, 1, 2]), None).unwrap(), a);
+        // Bad orders are errors, not panics.
+        assert!(a.permuted(Some(&[0, 1]), None).is_err());
+        assert!(a.permuted(Some(&[0, 1, 3]), None).is_err());
+        assert!(a.permuted(None, Some(&[0, 1, 2])).is_err());
+        assert!(a.permuted(None, Some(&[0, 1, 2, 4])).is_err());
+        assert!(a.permuted(None, Some(&[0, 0, 2, 0])).is_err()); // columns 1 and 3 of row 0 collide
     }
 }
