@@ -167,7 +167,7 @@ impl Hierarchy {
         self.inner.pooling.len()
     }
 
-    /// The pooler's name (``"ours"`` for ``"mean"``).
+    /// The pooler's name (``"mean"`` also for ``"ours"``, its older name).
     #[getter]
     fn pool_kind(&self) -> String {
         self.inner.config.pooler.to_string()

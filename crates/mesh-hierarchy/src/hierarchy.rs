@@ -27,7 +27,7 @@ pub struct HierarchyConfig {
 impl Default for HierarchyConfig {
     fn default() -> Self {
         Self {
-            pooler: Pooler::Ours,
+            pooler: Pooler::Mean,
             levels: 1,
             ratio: 0.5,
             lambda_max: LambdaMax::Two,

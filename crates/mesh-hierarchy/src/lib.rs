@@ -30,7 +30,7 @@
 //! use mesh_hierarchy::{Hierarchy, HierarchyConfig, Pooler};
 //! # fn main() -> Result<(), mesh_hierarchy::HierarchyError> {
 //! let sphere = qem_simplify::shapes::icosphere(2);
-//! let config = HierarchyConfig { pooler: Pooler::Ours, levels: 2, ..Default::default() };
+//! let config = HierarchyConfig { pooler: Pooler::Mean, levels: 2, ..Default::default() };
 //! let h = Hierarchy::build(&sphere, &config)?;
 //! assert_eq!(h.vertex_counts(), vec![162, 81, 41]);
 //! let coarse = h.pooling[0].pool(&vec![1.0; 162], 1)?;
@@ -52,5 +52,5 @@ pub use hierarchy::{Hierarchy, HierarchyConfig, Level};
 pub use laplacian::{
     LambdaMax, adjacency, normalized_laplacian, rescaled_laplacian, try_adjacency,
 };
-pub use pooling::{DepoolMode, Pooler, PoolingOp, UnknownDepoolMode, UnknownPooler};
+pub use pooling::{DepoolMode, PoolMode, Pooler, PoolingOp, UnknownDepoolMode, UnknownPooler};
 pub use sparse_csr::{CsrError, CsrMatrix};

@@ -7,12 +7,16 @@ use sparse_csr::CsrMatrix;
 use std::fmt;
 use std::str::FromStr;
 
-/// Which pooling a hierarchy uses (the paper's ablation, Table 3).
+/// Which pooling a hierarchy uses (the paper's ablation, Table 3): the one user-facing choice,
+/// from the command line (`--pool`) through the model's configuration to the hierarchy's
+/// operators, which carry how they are applied ([`PoolingOp::mode`]) so that no later stage
+/// decides it again. Names: `mean` (or `ours`), `max`, `qem`, `sampling`, `none`, `graph`,
+/// `remesh`.
 ///
 /// The two poolers added last, for the table's "Graph Pooling" and "Uniform Simp." columns:
 ///
 /// **Graph pooling** ([`Pooler::Graph`]; Shen et al. 2018, KCNet). The coarse vertex set and
-/// coarse mesh are exactly those of [`Pooler::Ours`] (modified QEM, λ = 0.001: the simplifier's
+/// coarse mesh are exactly those of [`Pooler::Mean`] (modified QEM, λ = 0.001: the simplifier's
 /// `survivors` and `coarse`). Coarse vertex c, with survivor s_c, pools over its neighbourhood
 /// N(c) = the closed one-ring of s_c on the fine graph ∪ the QEM cluster of c; the clusters
 /// partition the fine vertices, so every fine vertex is in some N(c).
@@ -35,18 +39,21 @@ use std::str::FromStr;
 /// `qem_simplify::remesh` of the fine mesh to `ratio` of its vertices (a uniform, isotropic
 /// remeshing, the paper's `\cite{remesh}`), which also returns each fine vertex's coarse
 /// vertex; pooling is the mean over those clusters and de-pooling copies (or is Pᵀ, as the
-/// configured [`DepoolMode`]), i.e. exactly [`Pooler::Ours`]'s operators on another coarse
+/// configured [`DepoolMode`]), i.e. exactly [`Pooler::Mean`]'s operators on another coarse
 /// level.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Pooler {
     /// The paper's: simplification with the edge-length term (λ = 0.001) and mean pooling.
-    /// Parsed from `ours` or `mean`.
-    Ours,
-    /// Classical QEM (λ = 0), same mean pooling.
-    Qem,
+    /// Parsed from `mean` or `ours` (the name hierarchy files written before the two choices
+    /// were one still carry).
+    #[default]
+    #[serde(alias = "ours")]
+    Mean,
     /// The paper's simplification with max pooling (signed largest magnitude per cluster).
     Max,
+    /// Classical QEM (λ = 0), same mean pooling.
+    Qem,
     /// Ranjan et al. 2018 (CoMA): keep the survivors of classical QEM, up-sample by barycentric
     /// coordinates in the nearest coarse triangle.
     Sampling,
@@ -62,9 +69,9 @@ pub enum Pooler {
 impl Pooler {
     /// All poolers: the ablation's original five first, then graph pooling and remeshing.
     pub const ALL: [Pooler; 7] = [
-        Self::Ours,
-        Self::Qem,
+        Self::Mean,
         Self::Max,
+        Self::Qem,
         Self::Sampling,
         Self::None,
         Self::Graph,
@@ -75,19 +82,49 @@ impl Pooler {
     /// simplifier: no pooling and remeshing).
     pub fn lambda(self) -> Option<f64> {
         match self {
-            Self::Ours | Self::Max | Self::Graph => Some(qem_simplify::DEFAULT_LAMBDA),
+            Self::Mean | Self::Max | Self::Graph => Some(qem_simplify::DEFAULT_LAMBDA),
             Self::Qem | Self::Sampling => Some(0.0),
             Self::None | Self::Remesh => Option::None,
         }
     }
+
+    /// How this pooler's operators are applied to features: the one place that decides it.
+    pub fn mode(self) -> PoolMode {
+        match self {
+            // Remeshing only changes the coarse level: its operators are mean pooling's.
+            Self::Mean | Self::Qem | Self::Remesh => PoolMode::Mean,
+            Self::Max => PoolMode::SignedMax,
+            Self::Graph => PoolMode::Max,
+            Self::Sampling => PoolMode::Sampling,
+            Self::None => PoolMode::Identity,
+        }
+    }
+}
+
+/// How a [`PoolingOp`] is applied to features, decided by its [`Pooler`] ([`Pooler::mode`]).
+/// De-pooling is always `depool · coarse`, except for [`PoolMode::Identity`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PoolMode {
+    /// `coarse = pool · fine`, the mean over each cluster (ours, classical QEM, remeshing).
+    Mean,
+    /// Per row of `pool`, the member of largest magnitude with its sign (ties: the negative
+    /// one, as the authors' code): max pooling.
+    SignedMax,
+    /// Per row of `pool` (a neighbourhood), the largest value (ties: the lowest fine index):
+    /// graph pooling.
+    Max,
+    /// `coarse = pool · fine` keeps the survivors; de-pooling up-samples barycentrically.
+    Sampling,
+    /// Both operators are the identity (no pooling): nothing to compute.
+    Identity,
 }
 
 impl fmt::Display for Pooler {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
-            Self::Ours => "ours",
-            Self::Qem => "qem",
+            Self::Mean => "mean",
             Self::Max => "max",
+            Self::Qem => "qem",
             Self::Sampling => "sampling",
             Self::None => "none",
             Self::Graph => "graph",
@@ -98,7 +135,7 @@ impl fmt::Display for Pooler {
 
 /// Why a pooler name was not recognised.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown pooler {0:?} (expected ours, mean, qem, max, sampling, none, graph or remesh)")]
+#[error("unknown pooler {0:?} (expected mean, max, qem, sampling, none, graph or remesh)")]
 pub struct UnknownPooler(pub String);
 
 impl FromStr for Pooler {
@@ -106,7 +143,7 @@ impl FromStr for Pooler {
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s.to_ascii_lowercase().as_str() {
-            "ours" | "mean" => Ok(Self::Ours),
+            "mean" | "ours" => Ok(Self::Mean),
             "qem" => Ok(Self::Qem),
             "max" => Ok(Self::Max),
             "sampling" => Ok(Self::Sampling),
@@ -226,6 +263,11 @@ impl PoolingOp {
         })
     }
 
+    /// How the operators are applied (from the pooler that built them).
+    pub fn mode(&self) -> PoolMode {
+        self.kind.mode()
+    }
+
     /// Fine vertex count n.
     pub fn fine_count(&self) -> usize {
         self.pool.cols()
@@ -242,8 +284,8 @@ impl PoolingOp {
     /// fine index), `pool · fine` otherwise. Errors when `fine` has not n · channels values.
     pub fn pool(&self, fine: &[f64], channels: usize) -> Result<Vec<f64>, HierarchyError> {
         check_len("fine", fine, self.fine_count(), channels)?;
-        Ok(match self.kind {
-            Pooler::Max | Pooler::Graph => self.select(fine, channels).0,
+        Ok(match self.mode() {
+            PoolMode::SignedMax | PoolMode::Max => self.select(fine, channels).0,
             _ => apply(&self.pool, fine, channels),
         })
     }
@@ -260,8 +302,8 @@ impl PoolingOp {
     ) -> Result<Vec<f64>, HierarchyError> {
         check_len("fine", fine, self.fine_count(), channels)?;
         check_len("upstream", upstream, self.coarse_count(), channels)?;
-        Ok(match self.kind {
-            Pooler::Max | Pooler::Graph => {
+        Ok(match self.mode() {
+            PoolMode::SignedMax | PoolMode::Max => {
                 let (_, picked) = self.select(fine, channels);
                 let mut grad = vec![0.0; fine.len()];
                 for (i, (&u, &g)) in picked.iter().zip(upstream).enumerate() {
@@ -283,7 +325,7 @@ impl PoolingOp {
         let m = self.coarse_count();
         let mut out = vec![0.0; m * channels];
         let mut picked = vec![u32::MAX; m * channels];
-        let signed = self.kind == Pooler::Max;
+        let signed = self.mode() == PoolMode::SignedMax;
         for c in 0..m {
             for k in 0..channels {
                 let (best, at) = (&mut out[c * channels + k], &mut picked[c * channels + k]);
@@ -357,7 +399,7 @@ mod tests {
             let json = serde_json::to_string(&p).unwrap();
             assert_eq!(json, format!("\"{p}\""));
         }
-        assert_eq!("mean".parse::<Pooler>(), Ok(Pooler::Ours));
+        assert_eq!("mean".parse::<Pooler>(), Ok(Pooler::Mean));
         assert!("avg".parse::<Pooler>().is_err());
     }
 
@@ -368,7 +410,7 @@ mod tests {
         let fine = [1.0, -2.0, 5.0, 0.5, -3.0, 2.0, 4.0, -0.5];
         assert!(op.pool(&fine, 3).is_err());
         assert_eq!(op.pool(&fine, 2).unwrap(), vec![-3.0, -2.0, 5.0, -0.5]);
-        assert!(PoolingOp::from_clusters(Pooler::Ours, &[0, 2], 2, DepoolMode::Copy).is_err());
-        assert!(PoolingOp::from_clusters(Pooler::Ours, &[0, 0], 2, DepoolMode::Copy).is_err());
+        assert!(PoolingOp::from_clusters(Pooler::Mean, &[0, 2], 2, DepoolMode::Copy).is_err());
+        assert!(PoolingOp::from_clusters(Pooler::Mean, &[0, 0], 2, DepoolMode::Copy).is_err());
     }
 }

@@ -30,7 +30,7 @@ fn samples() -> Vec<Hierarchy> {
         Hierarchy::build(&bumpy_grid(12, 10), &sampling).unwrap(),
         Hierarchy::build(&bumpy_grid(12, 10), &transpose).unwrap(),
         Hierarchy::build(&icosphere(1), &config(Pooler::None, 1)).unwrap(),
-        Hierarchy::build(&icosphere(1), &config(Pooler::Ours, 0)).unwrap(),
+        Hierarchy::build(&icosphere(1), &config(Pooler::Mean, 0)).unwrap(),
     ]
 }
 
@@ -149,7 +149,7 @@ fn version_1_json_files_still_load() {
 
 #[test]
 fn the_binary_file_is_less_than_half_the_json() {
-    let h = Hierarchy::build(&icosphere(4), &config(Pooler::Ours, 2)).unwrap();
+    let h = Hierarchy::build(&icosphere(4), &config(Pooler::Mean, 2)).unwrap();
     let (binary, json) = (temp_path("size.hierarchy"), temp_path("size.json"));
     h.save(&binary).unwrap();
     write_json_v1(&h, &json);
@@ -166,7 +166,7 @@ fn the_binary_file_is_less_than_half_the_json() {
 
 #[test]
 fn a_flipped_data_byte_is_refused_naming_the_file() {
-    let h = Hierarchy::build(&torus(12, 8, 1.0, 0.3), &config(Pooler::Ours, 2)).unwrap();
+    let h = Hierarchy::build(&torus(12, 8, 1.0, 0.3), &config(Pooler::Mean, 2)).unwrap();
     let path = temp_path("flipped.hierarchy");
     h.save(&path).unwrap();
     let good = std::fs::read(&path).unwrap();
@@ -235,7 +235,7 @@ fn foreign_newer_and_unlabelled_files_are_refused() {
     write(FORMAT, 2, &[("hierarchy", "{\"levels\": 3}")]);
     assert!(load_error(&path).contains("metadata \"hierarchy\""));
     // JSON that claims a later version.
-    let h = Hierarchy::build(&icosphere(1), &config(Pooler::Ours, 1)).unwrap();
+    let h = Hierarchy::build(&icosphere(1), &config(Pooler::Mean, 1)).unwrap();
     write_json_v1(&h, &path);
     let text = std::fs::read_to_string(&path).unwrap();
     std::fs::write(&path, text.replace("\"version\":1", "\"version\":2")).unwrap();

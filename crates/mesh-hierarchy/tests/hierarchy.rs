@@ -35,7 +35,7 @@ fn constant_fields_survive_every_pooler() {
 fn mean_pool_after_copy_depool_is_identity() {
     for mesh in meshes() {
         for pooler in [
-            Pooler::Ours,
+            Pooler::Mean,
             Pooler::Qem,
             Pooler::Max,
             Pooler::None,
@@ -57,7 +57,7 @@ fn mean_pool_after_copy_depool_is_identity() {
 fn sparse_operators_equal_dense_reference() {
     let mesh = icosphere(2);
     for (pooler, lambda) in [
-        (Pooler::Ours, qem_simplify::DEFAULT_LAMBDA),
+        (Pooler::Mean, qem_simplify::DEFAULT_LAMBDA),
         (Pooler::Qem, 0.0),
     ] {
         for mode in [DepoolMode::Copy, DepoolMode::Transpose] {
@@ -98,7 +98,7 @@ fn sparse_operators_equal_dense_reference() {
 #[test]
 fn two_level_hierarchies_compose() {
     let mesh = torus(16, 10, 1.0, 0.35);
-    let h = Hierarchy::build(&mesh, &config(Pooler::Ours, 2)).unwrap();
+    let h = Hierarchy::build(&mesh, &config(Pooler::Mean, 2)).unwrap();
     let cfg = SimplifyConfig::default();
     let s1 = simplify(&mesh, &cfg).unwrap();
     let s2 = simplify(&s1.coarse, &cfg).unwrap();
@@ -138,7 +138,7 @@ fn laplacians_match_dense_formula_on_every_level() {
     for lambda_max in [LambdaMax::Two, LambdaMax::PowerIteration(200)] {
         let cfg = HierarchyConfig {
             lambda_max,
-            ..config(Pooler::Ours, 2)
+            ..config(Pooler::Mean, 2)
         };
         let h = Hierarchy::build(&bumpy_grid(9, 9), &cfg).unwrap();
         for level in &h.levels {
@@ -257,7 +257,7 @@ fn horse_gallop_template_builds_one_level() {
     let set = mesh_io::load_set(&dir).unwrap().value;
     let template = set.template();
     for pooler in [
-        Pooler::Ours,
+        Pooler::Mean,
         Pooler::Sampling,
         Pooler::Graph,
         Pooler::Remesh,

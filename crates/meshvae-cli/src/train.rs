@@ -7,7 +7,7 @@ use deform_features::FeatureOptions;
 use mesh_hierarchy::{DepoolMode, HierarchyConfig};
 use mesh_io::{MeshSet, TriMesh};
 use meshvae::{
-    ConvKind, ModelConfig, ModelFolder, PoolKind, Split, Structure, TrainConfig, TrainOptions,
+    ConvKind, ModelConfig, ModelFolder, Pooler, Split, Structure, TrainConfig, TrainOptions,
     TrainRequest,
 };
 use std::path::{Path, PathBuf};
@@ -56,7 +56,7 @@ pub struct TrainArgs {
     /// (uniform remeshing, mean over nearest-vertex clusters), graph (graph max pooling, Shen
     /// et al. 2018), none [default: mean].
     #[arg(long)]
-    pool: Option<PoolKind>,
+    pool: Option<Pooler>,
     /// Meshes per step [default: 50].
     #[arg(long)]
     batch: Option<usize>,

@@ -23,44 +23,6 @@ pub enum ConvKind {
     Spatial,
 }
 
-/// The pooling between levels (the paper's ablation).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum PoolKind {
-    /// The paper's: edge contraction with the edge-length term, mean pooling.
-    #[default]
-    Mean,
-    /// The same simplification, signed max-magnitude pooling.
-    Max,
-    /// Classical QEM simplification, mean pooling.
-    Qem,
-    /// CoMA sampling: keep the survivors, barycentric up-sampling.
-    Sampling,
-    /// No pooling: every level is the template (the authors' no-pooling ablation).
-    None,
-    /// Graph max pooling (Shen et al. 2018): our simplification's coarse level, the plain
-    /// channel-wise max over overlapping neighbourhoods (survivor's one-ring ∪ cluster),
-    /// de-pooling by the mean over the neighbourhoods containing a vertex
-    /// (see [`mesh_hierarchy::Pooler`]).
-    Graph,
-    /// Uniform remeshing as the coarse level, mean pooling over its clusters.
-    Remesh,
-}
-
-impl PoolKind {
-    /// Every pooling: the original five first (older plans index them), then the two added
-    /// for the ablation's graph-pooling and uniform-remeshing columns.
-    pub const ALL: [PoolKind; 7] = [
-        Self::Mean,
-        Self::Max,
-        Self::Qem,
-        Self::Sampling,
-        Self::None,
-        Self::Graph,
-        Self::Remesh,
-    ];
-}
-
 macro_rules! names {
     ($ty:ty, $what:literal, $($variant:ident => $name:literal),+) => {
         impl fmt::Display for $ty {
@@ -86,8 +48,6 @@ macro_rules! names {
 }
 
 names!(ConvKind, "conv", Spectral => "spectral", Spatial => "spatial");
-names!(PoolKind, "pool", Mean => "mean", Max => "max", Qem => "qem", Sampling => "sampling",
-    None => "none", Graph => "graph", Remesh => "remesh");
 
 /// The network's configuration. `Default` is the paper's network as the authors' code runs it
 /// (its released TensorFlow code), except `last_encoder_linear`, which follows the
@@ -97,7 +57,8 @@ pub struct ModelConfig {
     /// Encoder layers, e.g. `CCPC`; the decoder mirrors them.
     pub structure: Structure,
     pub conv: ConvKind,
-    pub pool: PoolKind,
+    /// The pooling between levels (the paper's ablation), and the hierarchy's pooler.
+    pub pool: Pooler,
     /// Chebyshev terms (orders 0 … K−1) of a spectral convolution; unused by spatial ones.
     pub k: usize,
     /// Size of the latent vector z.
@@ -125,7 +86,7 @@ impl Default for ModelConfig {
         Self {
             structure: Structure::default(),
             conv: ConvKind::Spectral,
-            pool: PoolKind::Mean,
+            pool: Pooler::Mean,
             k: 3,
             latent: 128,
             channels: FEATURE_CHANNELS,
@@ -154,19 +115,6 @@ pub struct ConvSpec {
 }
 
 impl ModelConfig {
-    /// The hierarchy's pooler for this pooling kind.
-    pub fn pooler(&self) -> Pooler {
-        match self.pool {
-            PoolKind::Mean => Pooler::Ours,
-            PoolKind::Qem => Pooler::Qem,
-            PoolKind::Max => Pooler::Max,
-            PoolKind::Sampling => Pooler::Sampling,
-            PoolKind::None => Pooler::None,
-            PoolKind::Graph => Pooler::Graph,
-            PoolKind::Remesh => Pooler::Remesh,
-        }
-    }
-
     /// Number of pooling steps = number of P in the structure. With `pool = none` the hierarchy
     /// still has that many (identity) steps, every level being the template.
     pub fn pool_levels(&self) -> usize {
@@ -176,7 +124,7 @@ impl ModelConfig {
     /// `HierarchyConfig::default()` with this configuration's pooler and level count.
     pub fn hierarchy_config(&self) -> HierarchyConfig {
         HierarchyConfig {
-            pooler: self.pooler(),
+            pooler: self.pool,
             levels: self.pool_levels(),
             ..HierarchyConfig::default()
         }
@@ -286,7 +234,7 @@ mod tests {
     fn defaults_and_json_round_trip() {
         let c = ModelConfig::default();
         assert_eq!((c.k, c.latent, c.channels, c.init_std), (3, 128, 9, 0.02));
-        assert_eq!(c.pooler(), Pooler::Ours);
+        assert_eq!(c.pool, Pooler::Mean);
         assert_eq!(c.pool_levels(), 1);
         let json = serde_json::to_string(&c).unwrap();
         assert!(json.contains("\"structure\":\"CCPC\""), "{json}");
@@ -296,44 +244,40 @@ mod tests {
 
     #[test]
     fn names_parse_like_the_cli() {
-        for p in PoolKind::ALL {
-            assert_eq!(p.to_string().parse::<PoolKind>().unwrap(), p);
+        for p in Pooler::ALL {
+            assert_eq!(p.to_string().parse::<Pooler>().unwrap(), p);
         }
-        assert_eq!("QEM".parse::<PoolKind>().unwrap(), PoolKind::Qem);
+        assert_eq!("QEM".parse::<Pooler>().unwrap(), Pooler::Qem);
         assert_eq!("spatial".parse::<ConvKind>().unwrap(), ConvKind::Spatial);
-        let err = "avg".parse::<PoolKind>().unwrap_err().to_string();
-        assert!(err.contains("pool") && err.contains("\"avg\""), "{err}");
-        let poolers: Vec<Pooler> = PoolKind::ALL
-            .iter()
-            .map(|&pool| {
-                ModelConfig {
-                    pool,
-                    ..Default::default()
-                }
-                .pooler()
-            })
-            .collect();
+        let err = "avg".parse::<Pooler>().unwrap_err().to_string();
+        assert!(err.contains("pooler") && err.contains("\"avg\""), "{err}");
+        // The names of the command line, of config.json and of hierarchy files; `ours` is the
+        // hierarchy's old name of `mean`.
+        let names: Vec<String> = Pooler::ALL.iter().map(|p| p.to_string()).collect();
         assert_eq!(
-            poolers,
-            [
-                Pooler::Ours,
-                Pooler::Max,
-                Pooler::Qem,
-                Pooler::Sampling,
-                Pooler::None,
-                Pooler::Graph,
-                Pooler::Remesh
-            ]
+            names,
+            ["mean", "max", "qem", "sampling", "none", "graph", "remesh"]
         );
-        assert_eq!("graph".parse::<PoolKind>().unwrap(), PoolKind::Graph);
-        assert_eq!("Remesh".parse::<PoolKind>().unwrap(), PoolKind::Remesh);
-        let json = serde_json::to_string(&PoolKind::Graph).unwrap();
+        assert_eq!("ours".parse::<Pooler>().unwrap(), Pooler::Mean);
+        assert_eq!(
+            serde_json::from_str::<Pooler>("\"ours\"").unwrap(),
+            Pooler::Mean
+        );
+        assert_eq!(serde_json::to_string(&Pooler::Mean).unwrap(), "\"mean\"");
+        let c = ModelConfig {
+            pool: Pooler::Graph,
+            ..Default::default()
+        };
+        assert_eq!(c.hierarchy_config().pooler, Pooler::Graph);
+        assert_eq!("graph".parse::<Pooler>().unwrap(), Pooler::Graph);
+        assert_eq!("Remesh".parse::<Pooler>().unwrap(), Pooler::Remesh);
+        let json = serde_json::to_string(&Pooler::Graph).unwrap();
         assert_eq!(json, "\"graph\"");
         assert_eq!(
-            serde_json::from_str::<PoolKind>("\"remesh\"").unwrap(),
-            PoolKind::Remesh
+            serde_json::from_str::<Pooler>("\"remesh\"").unwrap(),
+            Pooler::Remesh
         );
-        let err = "kcnet".parse::<PoolKind>().unwrap_err().to_string();
+        let err = "kcnet".parse::<Pooler>().unwrap_err().to_string();
         assert!(err.contains("graph") && err.contains("remesh"), "{err}");
     }
 

@@ -84,7 +84,7 @@ mod wide;
 pub use adam::{Adam, AdamConfig};
 pub use batch_norm::BatchNorm;
 pub use checkpoint::{Checkpoint, Progress};
-pub use config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
+pub use config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig};
 pub use data::{MeshData, NormalizationFit, denormalize};
 pub use embed::{
     EmbedOptions, Embedding, LoopMeasure, MIN_EMBED_MESHES, embed, largest_variance_dims,
@@ -99,6 +99,9 @@ pub use folder::{
 pub use generate::{GenerateOptions, Generated, Neighbour, generate};
 pub use interpolate::{Interpolation, interpolate};
 pub use loss::{Loss, LossWeights};
+/// The pooling choice (`ModelConfig::pool`) is the hierarchy's own [`Pooler`]: one enum from
+/// the command line to the operators, which say how they apply ([`PoolMode`]).
+pub use mesh_hierarchy::{PoolMode, Pooler};
 pub use model::{Encoded, Engine, MeshVae, Mode, StepLoss};
 pub use params::{ParamCount, param_count};
 pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};

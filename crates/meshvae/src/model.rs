@@ -19,7 +19,7 @@ pub use engine::{Engine, StepLoss};
 pub(crate) use file::{entry as tensor_entry, stamped_error};
 
 use crate::batch_norm::BatchNorm;
-use crate::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig, PoolKind};
+use crate::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig};
 use crate::dense::{GradSink, Orientation, dense};
 use crate::error::{Result, VaeError};
 use crate::params::ParamCount;
@@ -28,7 +28,7 @@ use crate::structure::Layer;
 use candle_core::backprop::GradStore;
 use candle_core::{DType, Device, Tensor, Var};
 use layers::{ConvBlock, Down, GraphConv, LevelOps, Up, Weights};
-use mesh_hierarchy::{Hierarchy, adjacency};
+use mesh_hierarchy::{Hierarchy, PoolMode, adjacency};
 use spectral_conv::{
     ChebConv, DePool, MaxMode, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv,
     neighbour_mean_matrix,
@@ -88,7 +88,7 @@ fn var<'a>(map: &'a BTreeMap<String, Var>, name: &str) -> Result<&'a Var> {
 }
 
 impl MeshVae {
-    /// An f32 model for `config` on `hierarchy` (built with `config.pooler()` and
+    /// An f32 model for `config` on `hierarchy` (built with `config.pool` and
     /// `config.pool_levels()` pooling steps), every weight drawn from `Rng::new(seed)`.
     pub fn new(
         config: &ModelConfig,
@@ -125,7 +125,7 @@ impl MeshVae {
 
         let mut levels: Vec<LevelOps> = Vec::with_capacity(n_levels);
         for (i, level) in hierarchy.levels[..n_levels].iter().enumerate() {
-            if i > 0 && config.pool == PoolKind::None {
+            if i > 0 && hierarchy.pooling[i - 1].mode() == PoolMode::Identity {
                 // Every level is the template: share its operators.
                 levels.push(levels[0].clone());
                 continue;
@@ -189,27 +189,26 @@ impl MeshVae {
 
         let (mut down, mut up) = (Vec::new(), Vec::new());
         for op in &hierarchy.pooling[..n_levels - 1] {
-            let (d, u) = match config.pool {
-                // Remeshing only changes the coarse level: its operators are mean pooling's.
-                PoolKind::Mean | PoolKind::Qem | PoolKind::Remesh => (
+            let (d, u) = match op.mode() {
+                PoolMode::Mean => (
                     Down::Mean(MeanPool::new(&op.pool, device)?),
                     Up::DePool(DePool::new(&op.depool, device)?),
                 ),
-                PoolKind::Max => (
+                PoolMode::SignedMax => (
                     Down::Max(MaxPool::new(&op.pool, device)?),
                     Up::DePool(DePool::new(&op.depool, device)?),
                 ),
                 // The plain max over each neighbourhood (the pooling matrix's rows), then the
                 // mean over the neighbourhoods containing each fine vertex.
-                PoolKind::Graph => (
+                PoolMode::Max => (
                     Down::Max(MaxPool::with_mode(&op.pool, MaxMode::Plain, device)?),
                     Up::DePool(DePool::new(&op.depool, device)?),
                 ),
-                PoolKind::Sampling => (
+                PoolMode::Sampling => (
                     Down::Sampling(Sampling::new(&op.pool, device)?),
                     Up::Sampling(Sampling::new(&op.depool, device)?),
                 ),
-                PoolKind::None => (Down::Identity, Up::Identity),
+                PoolMode::Identity => (Down::Identity, Up::Identity),
             };
             down.push(d);
             up.push(u);
@@ -595,13 +594,13 @@ fn check_hierarchy(config: &ModelConfig, h: &Hierarchy) -> Result<()> {
             ),
         ));
     }
-    let pooler = config.pooler();
+    let pooler = config.pool;
     if let Some(op) = h.pooling[..need].iter().find(|op| op.kind != pooler) {
         return Err(VaeError::argument(
             "hierarchy",
             format!(
-                "built with pooler {}; the model's pool {} needs {pooler}",
-                op.kind, config.pool
+                "built with pooler {}; the model's pool is {pooler}",
+                op.kind
             ),
         ));
     }

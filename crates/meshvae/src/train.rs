@@ -168,7 +168,7 @@ pub struct TrainSummary {
 /// The hierarchy settings a model configuration needs.
 pub fn hierarchy_config(model: &ModelConfig, base: HierarchyConfig) -> HierarchyConfig {
     HierarchyConfig {
-        pooler: model.pooler(),
+        pooler: model.pool,
         levels: model.pool_levels(),
         ..base
     }

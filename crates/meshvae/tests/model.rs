@@ -5,13 +5,13 @@
 use candle_core::{DType, Device, Tensor, Var};
 use mesh_hierarchy::Hierarchy;
 use meshvae::{
-    Adam, ConvKind, LossWeights, MeshVae, Mode, ModelConfig, PoolKind, Rng, VaeError, param_count,
+    Adam, ConvKind, LossWeights, MeshVae, Mode, ModelConfig, Pooler, Rng, VaeError, param_count,
 };
 use std::collections::HashMap;
 use std::path::PathBuf;
 
 /// Hierarchies of the 162-vertex icosphere, one per (pooler, depth).
-struct Hierarchies(HashMap<(PoolKind, usize), Hierarchy>);
+struct Hierarchies(HashMap<(Pooler, usize), Hierarchy>);
 
 impl Hierarchies {
     fn new() -> Self {
@@ -78,7 +78,7 @@ fn every_structure_conv_and_pool_gives_the_right_shapes_and_ranges() {
     let dev = Device::Cpu;
     for structure in ["CCPC", "CPCPC", "CCPCCPC", "C"] {
         for conv in [ConvKind::Spectral, ConvKind::Spatial] {
-            for pool in PoolKind::ALL {
+            for pool in Pooler::ALL {
                 let config = ModelConfig {
                     structure: structure.parse().unwrap(),
                     conv,
@@ -125,7 +125,7 @@ fn every_structure_conv_and_pool_gives_the_right_shapes_and_ranges() {
                 assert_eq!(counted.with_biases, scalars, "{case}");
                 let levels = structure.matches('P').count() + 1;
                 assert_eq!(model.vertex_counts().len(), levels, "{case}");
-                if pool == PoolKind::None {
+                if pool == Pooler::None {
                     assert!(model.vertex_counts().iter().all(|&n| n == v), "{case}");
                 } else if structure != "C" {
                     assert!(model.vertex_counts()[1] < v, "{case}");
@@ -200,18 +200,18 @@ fn loss_gradients_match_finite_differences_in_f64() {
         ModelConfig {
             structure: "CPCPC".parse().unwrap(),
             conv: ConvKind::Spatial,
-            pool: PoolKind::Sampling,
+            pool: Pooler::Sampling,
             tie_decoder_convs: true,
             ..small.clone()
         },
         ModelConfig {
-            pool: PoolKind::Max,
+            pool: Pooler::Max,
             last_encoder_linear: false,
             ..small.clone()
         },
         ModelConfig {
             structure: "CPC".parse().unwrap(),
-            pool: PoolKind::None,
+            pool: Pooler::None,
             tie_decoder_convs: true,
             batch_norm: false,
             ..small
@@ -423,7 +423,7 @@ fn same_seed_same_model_and_save_load_round_trips() {
 
     // Another configuration: same shapes (qem) or other shapes (latent) are both refused.
     let qem = ModelConfig {
-        pool: PoolKind::Qem,
+        pool: Pooler::Qem,
         ..config.clone()
     };
     let mut other = MeshVae::new(&qem, hierarchies.get(&qem), &dev, 1).unwrap();

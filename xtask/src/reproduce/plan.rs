@@ -7,7 +7,7 @@
 //! until the validation loss converges ([`Budget`]).
 
 use super::paper::AblationColumn;
-use meshvae::{ConvKind, DEFAULT_MAX_STEPS, ModelConfig, PoolKind, Structure, TrainConfig};
+use meshvae::{ConvKind, DEFAULT_MAX_STEPS, ModelConfig, Pooler, Structure, TrainConfig};
 use std::path::{Path, PathBuf};
 
 /// Which of the paper's tables a column belongs to.
@@ -31,7 +31,7 @@ pub struct Column {
     pub paper: Option<AblationColumn>,
     pub structure: &'static str,
     pub conv: ConvKind,
-    pub pool: PoolKind,
+    pub pool: Pooler,
 }
 
 impl Column {
@@ -66,7 +66,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::SpatialConv),
         structure: "CCPC",
         conv: ConvKind::Spatial,
-        pool: PoolKind::None,
+        pool: Pooler::None,
     },
     Column {
         id: "no-pool",
@@ -75,7 +75,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::SpectralConv),
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::None,
+        pool: Pooler::None,
     },
     Column {
         id: "qem",
@@ -84,7 +84,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::ClassicalQem),
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Qem,
+        pool: Pooler::Qem,
     },
     Column {
         id: "remesh",
@@ -93,7 +93,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::UniformSimp),
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Remesh,
+        pool: Pooler::Remesh,
     },
     Column {
         id: "graph",
@@ -102,7 +102,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::GraphPooling),
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Graph,
+        pool: Pooler::Graph,
     },
     Column {
         id: "sampling",
@@ -111,7 +111,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::MeshSampling),
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Sampling,
+        pool: Pooler::Sampling,
     },
     Column {
         id: "max",
@@ -120,7 +120,7 @@ pub const COLUMNS: &[Column] = &[
         paper: None,
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Max,
+        pool: Pooler::Max,
     },
     Column {
         id: OURS,
@@ -129,7 +129,7 @@ pub const COLUMNS: &[Column] = &[
         paper: Some(AblationColumn::Ours),
         structure: "CCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Mean,
+        pool: Pooler::Mean,
     },
     Column {
         id: "cpcpc",
@@ -138,7 +138,7 @@ pub const COLUMNS: &[Column] = &[
         paper: None,
         structure: "CPCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Mean,
+        pool: Pooler::Mean,
     },
     Column {
         id: "ccpccpc",
@@ -147,7 +147,7 @@ pub const COLUMNS: &[Column] = &[
         paper: None,
         structure: "CCPCCPC",
         conv: ConvKind::Spectral,
-        pool: PoolKind::Mean,
+        pool: Pooler::Mean,
     },
 ];
 

@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::rng::Rng;
-use mesh_hierarchy::HierarchyConfig;
+use mesh_hierarchy::{HierarchyConfig, Pooler};
 
 fn hierarchy(config: &ModelConfig) -> Hierarchy {
     let sphere = qem_simplify::shapes::icosphere(2);
@@ -100,13 +100,16 @@ fn hierarchy_of_another_pooler_or_depth_is_refused() {
     let mean = ModelConfig::default();
     let h = hierarchy(&mean);
     let qem = ModelConfig {
-        pool: PoolKind::Qem,
+        pool: Pooler::Qem,
         ..Default::default()
     };
     let err = MeshVae::new(&qem, &h, &Device::Cpu, 0)
         .unwrap_err()
         .to_string();
-    assert!(err.contains("pooler ours") && err.contains("qem"), "{err}");
+    assert!(
+        err.contains("pooler mean") && err.contains("pool is qem"),
+        "{err}"
+    );
     let deep = ModelConfig {
         structure: "CPCPC".parse().unwrap(),
         ..Default::default()

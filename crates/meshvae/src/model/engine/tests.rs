@@ -3,11 +3,12 @@
 //! counts.
 
 use super::*;
-use crate::config::{ConvKind, ModelConfig, PoolKind};
+use crate::config::{ConvKind, ModelConfig};
 use crate::model::Mode;
 use crate::rng::Rng;
 use candle_core::Device;
 use mesh_hierarchy::Hierarchy;
+use mesh_hierarchy::Pooler;
 
 fn hierarchy(config: &ModelConfig) -> Hierarchy {
     let sphere = qem_simplify::shapes::icosphere(2);
@@ -81,7 +82,7 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     };
     let sparse_pool = matches!(
         config.pool,
-        PoolKind::Mean | PoolKind::Qem | PoolKind::Remesh | PoolKind::Sampling
+        Pooler::Mean | Pooler::Qem | Pooler::Remesh | Pooler::Sampling
     );
     assert_eq!(renumbered, sparse_pool, "{case}: renumbered");
     assert!(
@@ -115,9 +116,9 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
 fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
     let mut configs = Vec::new();
     // Every pooling, graph and remesh included.
-    assert!(PoolKind::ALL.contains(&PoolKind::Graph) && PoolKind::ALL.contains(&PoolKind::Remesh));
+    assert!(Pooler::ALL.contains(&Pooler::Graph) && Pooler::ALL.contains(&Pooler::Remesh));
     for structure in ["CCPC", "CPCPC"] {
-        for pool in PoolKind::ALL {
+        for pool in Pooler::ALL {
             configs.push(ModelConfig {
                 structure: structure.parse().unwrap(),
                 pool,
@@ -129,7 +130,7 @@ fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
     }
     // Spatial convolutions (the kernel with K = 2 on D⁻¹A, two weight variables), pooled and
     // not (the paper's "Only Spatial Conv." column).
-    for pool in [PoolKind::Mean, PoolKind::None] {
+    for pool in [Pooler::Mean, Pooler::None] {
         configs.push(ModelConfig {
             conv: ConvKind::Spatial,
             pool,
@@ -180,11 +181,11 @@ fn f32_step_is_close_to_candle() {
 #[test]
 fn inference_error_equals_candle_and_leaves_the_step_alone() {
     let weights = LossWeights::default();
-    for (pool, dtype, tol) in PoolKind::ALL
-        .iter()
-        .map(|&p| (p, DType::F64, 1e-10))
-        .chain([(PoolKind::Mean, DType::F32, 1e-5)])
-    {
+    for (pool, dtype, tol) in Pooler::ALL.iter().map(|&p| (p, DType::F64, 1e-10)).chain([(
+        Pooler::Mean,
+        DType::F32,
+        1e-5,
+    )]) {
         let config = ModelConfig {
             pool,
             channels: 5,
@@ -259,7 +260,7 @@ fn train(config: &ModelConfig, engine: bool, steps: usize) -> Vec<Vec<f64>> {
 fn training_steps_match_candle_and_repeat_bit_for_bit_on_any_thread_count() {
     // Max-type poolings route gradients through recorded selections; graph pooling's overlap
     // makes the backward pass sum several of them per vertex.
-    for pool in [PoolKind::Max, PoolKind::Graph] {
+    for pool in [Pooler::Max, Pooler::Graph] {
         let config = ModelConfig {
             structure: "CPCPC".parse().unwrap(),
             pool,
