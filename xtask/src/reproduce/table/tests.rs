@@ -1,5 +1,5 @@
 use super::*;
-use crate::reproduce::plan::{self, Budget, PROTOCOLS};
+use crate::reproduce::plan::{self, Budget, OURS, PROTOCOLS};
 use crate::reproduce::{LoadedSet, Machine, Options, synthetic_config};
 use meshvae::ModelConfig;
 
