@@ -12,7 +12,7 @@
 //! why it stopped, [`StopReason`]), checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
 //! backward over reused buffers ([`Engine`], checked against candle's autograd) when it
 //! supports the model, and candle's autograd otherwise. A conditional model
-//! (`ModelConfig::labels`) also takes each mesh's label (see `model/cond.rs`); generation,
+//! (`ModelConfig::labels`) also takes each mesh's label (see `candle/model/cond.rs`); generation,
 //! interpolation and embedding work on the trained folder ([`TrainedModel`]).
 //!
 //! The defaults are the paper's network as the authors' code runs it (`CCPC`, Chebyshev K = 3,
@@ -53,66 +53,64 @@
 //! # Ok(()) }
 //! ```
 
-mod adam;
-mod batch_norm;
-mod checkpoint;
-mod config;
-mod data;
-mod dense;
-mod embed;
+mod apps;
+mod candle;
+mod cpu;
 mod error;
-mod eval;
 mod folder;
-mod generate;
-mod interpolate;
-mod loss;
-mod model;
-mod ops;
-mod params;
-mod pca;
-mod quality;
-mod reconstruct;
-mod rng;
-mod schedule;
-mod split;
-mod sse;
-mod structure;
+mod net;
+mod numerics;
 mod train;
-mod tsne;
-mod wide;
 
-pub use adam::{Adam, AdamConfig};
-pub use batch_norm::BatchNorm;
-pub use checkpoint::{Checkpoint, Progress};
-pub use config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig};
-pub use data::{MeshData, NormalizationFit, denormalize};
-pub use embed::{
-    EmbedOptions, Embedding, LoopMeasure, MIN_EMBED_MESHES, embed, largest_variance_dims,
-    loop_measure,
-};
+// Errors.
 pub use error::{Result, VaeError};
-pub use eval::{ErrorReport, align_centroids, error_report, mean_shape};
-pub use folder::{
-    DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE, ModelFolder, ModelSpec, SplitFile, TrainConfig,
-    TrainedModel,
-};
-pub use generate::{GenerateOptions, Generated, Neighbour, generate};
-pub use interpolate::{Interpolation, interpolate};
-pub use loss::{Loss, LossWeights};
+
+// The network description (`net/`): configuration, layer structure, parameter count.
 /// The pooling choice (`ModelConfig::pool`) is the hierarchy's own [`Pooler`]: one enum from
 /// the command line to the operators, which say how they apply ([`PoolMode`]).
 pub use mesh_hierarchy::{PoolMode, Pooler};
-pub use model::{Encoded, Engine, MeshVae, Mode, StepLoss};
-pub use params::{ParamCount, param_count};
-pub use pca::{Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen};
-pub use quality::{MEAN_SHAPE_FRACTION, QualityWarning, quality_warnings};
-pub use reconstruct::{CopySplit, EvalReport};
-pub use rng::Rng;
-pub use schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
-pub use split::{Selection, Split, resolve_mesh};
-pub use structure::{Layer, Structure};
+pub use net::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig};
+pub use net::params::{ParamCount, param_count};
+pub use net::structure::{Layer, Structure};
+
+// The candle reference model (`candle/`).
+pub use candle::batch_norm::{BatchNorm, Mode};
+pub use candle::model::{Encoded, MeshVae};
+
+// The hand-written CPU training step (`cpu/`).
+pub use cpu::{Engine, StepLoss};
+
+// Training (`train/`): the loop, its optimiser, losses, schedule, data, split and checkpoints.
+pub use train::adam::{Adam, AdamConfig};
+pub use train::checkpoint::{Checkpoint, Progress};
+pub use train::config::{DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE, TrainConfig};
+pub use train::data::{MeshData, NormalizationFit, denormalize};
+pub use train::folder::{ModelFolder, ModelSpec, SplitFile};
+pub use train::loss::{Loss, LossWeights};
+pub use train::schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
+pub use train::split::{Selection, Split, resolve_mesh};
 pub use train::{
     EpochRecord, Executor, ExecutorKind, RunStatus, TrainOptions, TrainRequest, TrainSummary,
     hierarchy_config, read_log, read_status, train, validation_loss,
 };
-pub use tsne::{Calibration, TsneOptions, calibrate, tsne, tsne_cost};
+
+// A trained model folder loaded for use (`folder.rs`).
+pub use folder::TrainedModel;
+
+// Applications of a trained model (`apps/`).
+pub use apps::embed::{
+    EmbedOptions, Embedding, LoopMeasure, MIN_EMBED_MESHES, embed, largest_variance_dims,
+    loop_measure,
+};
+pub use apps::eval::{ErrorReport, align_centroids, error_report, mean_shape};
+pub use apps::generate::{GenerateOptions, Generated, Neighbour, generate};
+pub use apps::interpolate::{Interpolation, interpolate};
+pub use apps::quality::{MEAN_SHAPE_FRACTION, QualityWarning, quality_warnings};
+pub use apps::reconstruct::{CopySplit, EvalReport};
+
+// Numerics (`numerics/`): random stream, PCA, t-SNE.
+pub use numerics::pca::{
+    Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen,
+};
+pub use numerics::rng::Rng;
+pub use numerics::tsne::{Calibration, TsneOptions, calibrate, tsne, tsne_cost};

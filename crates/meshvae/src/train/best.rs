@@ -13,11 +13,11 @@
 //! checkpoint's epoch and puts them in place ([`settle_pending`]); killed before the
 //! checkpoint, the old pair is whole and the pending file is dropped.
 
-use crate::adam::Adam;
-use crate::checkpoint::{Checkpoint, Progress};
+use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
-use crate::folder::ModelFolder;
-use crate::model::MeshVae;
+use crate::train::adam::Adam;
+use crate::train::checkpoint::{Checkpoint, Progress};
+use crate::train::folder::ModelFolder;
 use candle_core::Tensor;
 use std::collections::BTreeMap;
 use std::path::Path;

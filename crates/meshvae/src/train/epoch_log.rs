@@ -1,7 +1,7 @@
 //! `log.jsonl`: one JSON line per finished epoch.
 
 use crate::error::{Result, VaeError};
-use crate::split::Selection;
+use crate::train::split::Selection;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;

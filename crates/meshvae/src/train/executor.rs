@@ -3,7 +3,8 @@
 //! and written on every line of `log.jsonl`, in `run.json` and in the summary, so that a run
 //! never changes path without a word.
 
-use crate::model::{Engine, MeshVae};
+use crate::candle::model::MeshVae;
+use crate::cpu::Engine;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 

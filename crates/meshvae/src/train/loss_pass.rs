@@ -1,9 +1,9 @@
 //! The losses measured after an epoch: the validation and test passes (inference mode, z = μ).
 
-use crate::data::MeshData;
+use crate::candle::model::MeshVae;
 use crate::error::Result;
-use crate::loss::LossWeights;
-use crate::model::MeshVae;
+use crate::train::data::MeshData;
+use crate::train::loss::LossWeights;
 use candle_core::Device;
 
 /// w_rec · mean over `ids` of the squared error with z = μ (inference mode), or `None`.
@@ -26,7 +26,7 @@ pub(super) fn epoch_loss(
     batch: usize,
     weights: &LossWeights,
     device: &Device,
-    mut engine: Option<&mut crate::model::Engine>,
+    mut engine: Option<&mut crate::cpu::Engine>,
 ) -> Result<Option<f64>> {
     if ids.is_empty() {
         return Ok(None);

@@ -4,11 +4,11 @@
 //! fold in a few steps, then turns NaN); the halving acts as the rate cut the plateau rule had
 //! not made yet.
 
-use crate::adam::Adam;
-use crate::checkpoint::Progress;
+use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
-use crate::model::MeshVae;
-use crate::schedule::Schedule;
+use crate::train::adam::Adam;
+use crate::train::checkpoint::Progress;
+use crate::train::schedule::Schedule;
 use candle_core::{DType, Tensor};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;

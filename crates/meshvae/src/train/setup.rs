@@ -2,12 +2,13 @@
 //! the state of one being resumed, with the checks that keep a folder from being overwritten.
 
 use super::EpochRecord;
-use crate::config::ModelConfig;
-use crate::data::{MeshData, NormalizationFit};
 use crate::error::{Result, VaeError};
-use crate::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, TrainConfig, VERSION};
-use crate::schedule::StopReason;
-use crate::split::Split;
+use crate::net::config::ModelConfig;
+use crate::train::config::TrainConfig;
+use crate::train::data::{MeshData, NormalizationFit};
+use crate::train::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, VERSION};
+use crate::train::schedule::StopReason;
+use crate::train::split::Split;
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
 use mesh_io::{MeshSet, ShapeGroups, TriMesh};
 

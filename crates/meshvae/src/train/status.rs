@@ -1,9 +1,9 @@
 //! `run.json`: where a run stands and why it ended, written with every checkpoint.
 
 use crate::error::Result;
-use crate::folder::ModelFolder;
-use crate::schedule::StopReason;
-use crate::split::Selection;
+use crate::train::folder::ModelFolder;
+use crate::train::schedule::StopReason;
+use crate::train::split::Selection;
 use serde::{Deserialize, Serialize};
 
 /// The state of a model's training run. While the run goes on (and if it is killed) its

@@ -1,0 +1,480 @@
+//! [`MeshVae`]: the network (the paper's Fig. 2 as the authors' released code runs it).
+//!
+//! Encoder: the structure's convolutions and poolings on the hierarchy's levels (conv → batch
+//! norm → tanh; the last convolution without batch norm and, by default, linear), flatten
+//! `[B, V_L·C]` (index p·C + c), μ = hW_μ + b_μ, σ = √(2·sigmoid(hW_σ + b_σ)) ∈ (0, √2).
+//! Decoder: h = zW_μᵀ + b_dec (tied to the μ head), reshape `[B, V_L, C]`, the mirrored
+//! convolutions and de-poolings, all ending in tanh, so x̂ ∈ (−1, 1).
+//! A conditional model (labels in its config) also feeds a one-hot label to both heads and to
+//! the decoder's dense layer: see `cond.rs`.
+
+mod build;
+mod cond;
+mod file;
+pub(crate) mod layers;
+mod vars;
+
+pub(crate) use cond::{LABEL_SCALE, pick as pick_labels, unknown_label};
+pub(crate) use file::{entry as tensor_entry, stamped_error};
+
+use crate::candle::batch_norm::Mode;
+use crate::candle::dense::{GradSink, Orientation, dense};
+use crate::error::{Result, VaeError};
+use crate::net::config::{FEATURE_CHANNELS, ModelConfig};
+use crate::net::params::ParamCount;
+use crate::net::structure::Layer;
+use crate::numerics::rng::Rng;
+use candle_core::backprop::GradStore;
+use candle_core::{DType, Device, Tensor, Var};
+use layers::{ConvBlock, Down, GraphConv, LevelOps, Up, Weights};
+use mesh_hierarchy::Hierarchy;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// The encoder's output: the posterior q(z|x) = N(μ, diag σ²), both `[B, latent]`.
+#[derive(Debug, Clone)]
+pub struct Encoded {
+    pub mu: Tensor,
+    pub sigma: Tensor,
+}
+
+/// The mesh VAE on one hierarchy.
+#[derive(Debug, Clone)]
+pub struct MeshVae {
+    config: ModelConfig,
+    dtype: DType,
+    device: Device,
+    /// Vertex counts of the levels the network uses (0 ..= number of poolings).
+    vertex_counts: Vec<usize>,
+    trainable: BTreeMap<String, Var>,
+    state: BTreeMap<String, Var>,
+    /// Encoder blocks in order.
+    pub(crate) enc: Vec<ConvBlock>,
+    /// Decoder blocks in the order they run.
+    pub(crate) dec: Vec<ConvBlock>,
+    /// Per level: its convolution operator (and transpose for tied decoder convolutions).
+    pub(crate) levels: Vec<LevelOps>,
+    /// `down[i]`: level i → i + 1; `up[i]`: level i + 1 → i.
+    pub(crate) down: Vec<Down>,
+    pub(crate) up: Vec<Up>,
+    w_mu: Tensor,
+    b_mu: Tensor,
+    w_sigma: Tensor,
+    b_sigma: Tensor,
+    b_dec: Tensor,
+    /// The label weights of a conditional model.
+    label_weights: Option<cond::LabelWeights>,
+    /// Where the backward pass sums the dense weights' gradients (see `dense.rs`).
+    sink_mu: Arc<GradSink>,
+    sink_sigma: Arc<GradSink>,
+}
+
+impl MeshVae {
+    /// An f32 model for `config` on `hierarchy` (built with `config.pool` and
+    /// `config.pool_levels()` pooling steps), every weight drawn from `Rng::new(seed)`.
+    pub fn new(
+        config: &ModelConfig,
+        hierarchy: &Hierarchy,
+        device: &Device,
+        seed: u64,
+    ) -> Result<Self> {
+        Self::with_dtype(config, hierarchy, device, DType::F32, seed)
+    }
+
+    /// As [`Self::new`] with f32 or f64 weights (f64 for gradient checks).
+    pub fn with_dtype(
+        config: &ModelConfig,
+        hierarchy: &Hierarchy,
+        device: &Device,
+        dtype: DType,
+        seed: u64,
+    ) -> Result<Self> {
+        config.validate()?;
+        if !matches!(dtype, DType::F32 | DType::F64) {
+            return Err(VaeError::argument(
+                "dtype",
+                format!("{dtype:?}; the model runs in f32 or f64"),
+            ));
+        }
+        build::check_hierarchy(config, hierarchy)?;
+        let n_levels = config.pool_levels() + 1;
+        let vertex_counts: Vec<usize> = hierarchy.vertex_counts()[..n_levels].to_vec();
+        let coarse = vertex_counts[n_levels - 1];
+        let mut plan = vars::plan(config, coarse);
+        plan.extend(cond::plan(config, coarse * config.channels));
+        let (trainable, state) =
+            vars::create(&plan, config.init_std, dtype, device, &mut Rng::new(seed))?;
+
+        let levels = build::level_ops(config, hierarchy, n_levels, device)?;
+        let (enc, dec) = build::conv_blocks(config, &levels, &trainable, &state)?;
+        let (down, up) = build::pooling(hierarchy, n_levels, device)?;
+
+        let t = |name: &str| -> Result<Tensor> {
+            Ok(build::var(&trainable, name)?.as_tensor().clone())
+        };
+        let label_weights = if config.is_conditional() {
+            let [mu, sigma, dec] = cond::NAMES;
+            Some(cond::LabelWeights {
+                mu: t(mu)?,
+                sigma: t(sigma)?,
+                dec: t(dec)?,
+            })
+        } else {
+            None
+        };
+        Ok(Self {
+            label_weights,
+            w_mu: t("enc.mu.weight")?,
+            b_mu: t("enc.mu.bias")?,
+            w_sigma: t("enc.sigma.weight")?,
+            b_sigma: t("enc.sigma.bias")?,
+            b_dec: t("dec.fc.bias")?,
+            sink_mu: Arc::default(),
+            sink_sigma: Arc::default(),
+            config: config.clone(),
+            dtype,
+            device: device.clone(),
+            vertex_counts,
+            trainable,
+            state,
+            enc,
+            dec,
+            levels,
+            down,
+            up,
+        })
+    }
+
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
+    /// Vertices of the template (the input's V).
+    pub fn vertex_count(&self) -> usize {
+        self.vertex_counts[0]
+    }
+
+    /// Vertices of every level the network uses, template first.
+    pub fn vertex_counts(&self) -> &[usize] {
+        &self.vertex_counts
+    }
+
+    pub fn latent(&self) -> usize {
+        self.config.latent
+    }
+
+    pub fn dtype(&self) -> DType {
+        self.dtype
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The trained variables, sorted by name (the order the optimiser and the L2 term use).
+    pub fn trainable_vars(&self) -> Vec<(String, Var)> {
+        self.trainable
+            .iter()
+            .map(|(n, v)| (n.clone(), v.clone()))
+            .collect()
+    }
+
+    /// The batch norms' running means and variances, sorted by name.
+    pub fn state_vars(&self) -> Vec<(String, Var)> {
+        self.state
+            .iter()
+            .map(|(n, v)| (n.clone(), v.clone()))
+            .collect()
+    }
+
+    /// Weights and biases (BN γ, β count as biases) actually created.
+    pub fn param_count(&self) -> ParamCount {
+        let (mut with_biases, mut without_biases) = (0, 0);
+        for (name, v) in &self.trainable {
+            let n = v.elem_count();
+            with_biases += n;
+            if !vars::is_bias(name) {
+                without_biases += n;
+            }
+        }
+        ParamCount {
+            with_biases,
+            without_biases,
+        }
+    }
+
+    /// The labels of a conditional model, in one-hot order (empty for an unconditional one).
+    pub fn labels(&self) -> &[String] {
+        &self.config.labels
+    }
+
+    pub fn is_conditional(&self) -> bool {
+        self.config.is_conditional()
+    }
+
+    /// One-hot rows `[B, L]` (the model's dtype and device) for `labels`, the active entry
+    /// being the label scale (8; see `cond.rs`).
+    ///
+    /// Errors: a label the model does not know (naming it and listing the known ones), or any
+    /// label for an unconditional model.
+    pub fn one_hot<S: AsRef<str>>(&self, labels: &[S]) -> Result<Tensor> {
+        cond::one_hot(self.labels(), labels, self.dtype, &self.device)
+    }
+
+    /// μ and σ `[B, latent]` of features x `[B, V, 9]` (unconditional models).
+    pub fn encode(&self, x: &Tensor, mode: Mode) -> Result<Encoded> {
+        self.encode_cond(x, None, mode)
+    }
+
+    /// μ and σ `[B, latent]` of features x `[B, V, 9]` with labels c `[B, L]` (one-hot rows;
+    /// `Some` exactly when the model is conditional).
+    pub fn encode_cond(&self, x: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Encoded> {
+        self.check_input("MeshVae::encode", x)?;
+        let label = self.check_labels("MeshVae::encode", c, x.dim(0)?)?;
+        let batch = x.dim(0)?;
+        // Vertex-major inside the network: see `spectral_conv`'s layouts.
+        let mut h = x.transpose(0, 1)?.contiguous()?;
+        let (mut level, mut blocks) = (0, self.enc.iter());
+        for layer in self.config.structure.layers() {
+            match layer {
+                Layer::Conv => {
+                    let block = blocks.next().ok_or_else(|| self.plan_error())?;
+                    h = block.forward(&h, mode, None)?;
+                }
+                Layer::Pool => {
+                    h = self.down[level].forward(&h)?;
+                    level += 1;
+                }
+            }
+        }
+        let flat = h
+            .transpose(0, 1)?
+            .contiguous()?
+            .reshape((batch, self.flat_width()))?;
+        let mut mu = dense(&flat, &self.w_mu, Orientation::Plain, &self.sink_mu)?
+            .broadcast_add(&self.b_mu)?;
+        let mut s = dense(&flat, &self.w_sigma, Orientation::Plain, &self.sink_sigma)?
+            .broadcast_add(&self.b_sigma)?;
+        if let Some((c, w)) = label {
+            mu = (mu + c.matmul(&w.mu)?)?;
+            s = (s + c.matmul(&w.sigma)?)?;
+        }
+        let sigma = (candle_nn::ops::sigmoid(&s)? * 2.0)?.sqrt()?;
+        Ok(Encoded { mu, sigma })
+    }
+
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` (unconditional models).
+    pub fn decode(&self, z: &Tensor, mode: Mode) -> Result<Tensor> {
+        self.decode_cond(z, None, mode)
+    }
+
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` and labels c `[B, L]` (`Some` exactly
+    /// when the model is conditional).
+    pub fn decode_cond(&self, z: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Tensor> {
+        let batch = self.check_latent("MeshVae::decode", z, None)?;
+        let coarse = self.vertex_counts[self.vertex_counts.len() - 1];
+        let mut h = self
+            .decoder_fc_cond(z, c)?
+            .reshape((batch, coarse, self.config.channels))?
+            .transpose(0, 1)?
+            .contiguous()?;
+        let (mut level, mut blocks) = (self.vertex_counts.len() - 1, self.dec.iter());
+        for layer in self.config.structure.layers().iter().rev() {
+            match layer {
+                Layer::Conv => {
+                    let block = blocks.next().ok_or_else(|| self.plan_error())?;
+                    let tied = self.tied_conv(block)?;
+                    h = block.forward(&h, mode, tied.as_ref())?;
+                }
+                Layer::Pool => {
+                    level -= 1;
+                    h = self.up[level].forward(&h)?;
+                }
+            }
+        }
+        Ok(h.transpose(0, 1)?.contiguous()?)
+    }
+
+    /// x̂ and the posterior for features x `[B, V, 9]` and noise ε `[B, latent]`:
+    /// z = μ + σ ⊙ ε.
+    pub fn forward(&self, x: &Tensor, eps: &Tensor, mode: Mode) -> Result<(Tensor, Encoded)> {
+        self.forward_cond(x, None, eps, mode)
+    }
+
+    /// As [`Self::forward`] with labels c `[B, L]` for both the encoder and the decoder.
+    pub fn forward_cond(
+        &self,
+        x: &Tensor,
+        c: Option<&Tensor>,
+        eps: &Tensor,
+        mode: Mode,
+    ) -> Result<(Tensor, Encoded)> {
+        let encoded = self.encode_cond(x, c, mode)?;
+        self.check_latent("MeshVae::forward (eps)", eps, Some(encoded.mu.dim(0)?))?;
+        let z = (&encoded.mu + (&encoded.sigma * eps)?)?;
+        Ok((self.decode_cond(&z, c, mode)?, encoded))
+    }
+
+    /// The deterministic reconstruction decode(μ) in eval mode.
+    pub fn reconstruct(&self, x: &Tensor) -> Result<Tensor> {
+        self.reconstruct_cond(x, None)
+    }
+
+    /// decode(μ(x, c), c) in eval mode.
+    pub fn reconstruct_cond(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        let encoded = self.encode_cond(x, c, Mode::Eval)?;
+        self.decode_cond(&encoded.mu, c, Mode::Eval)
+    }
+
+    /// The decoder's dense layer: zW_μᵀ + b_dec `[B, V_L·C]` (unconditional models).
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub(crate) fn decoder_fc(&self, z: &Tensor) -> Result<Tensor> {
+        self.decoder_fc_cond(z, None)
+    }
+
+    /// The decoder's dense layer: zW_μᵀ + b_dec (+ c·W_dc for a conditional model).
+    pub(crate) fn decoder_fc_cond(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        let label = self.check_labels("MeshVae::decode", c, z.dim(0)?)?;
+        let h = dense(z, &self.w_mu, Orientation::Transposed, &self.sink_mu)?
+            .broadcast_add(&self.b_dec)?;
+        Ok(match label {
+            Some((c, w)) => (h + c.matmul(&w.dec)?)?,
+            None => h,
+        })
+    }
+
+    /// Checks that labels come exactly with a conditional model, as `[batch, L]` of the model's
+    /// kind, and pairs them with the label weights.
+    fn check_labels<'a>(
+        &'a self,
+        op: &'static str,
+        c: Option<&'a Tensor>,
+        batch: usize,
+    ) -> Result<Option<(&'a Tensor, &'a cond::LabelWeights)>> {
+        match (c, &self.label_weights) {
+            (None, None) => Ok(None),
+            (Some(_), None) => Err(VaeError::argument(
+                "label",
+                format!("{op}: the model is not conditional (it was trained without labels)"),
+            )),
+            (None, Some(_)) => Err(VaeError::argument(
+                "label",
+                format!(
+                    "{op}: the model is conditional on the labels {}; give each mesh's label",
+                    self.labels().join(", ")
+                ),
+            )),
+            (Some(c), Some(w)) => {
+                let l = self.labels().len();
+                if c.dims() != [batch, l] {
+                    return Err(VaeError::shape(
+                        op,
+                        format!("labels of shape {:?}; expected [{batch}, {l}]", c.dims()),
+                    ));
+                }
+                self.check_kind(op, c)?;
+                Ok(Some((c, w)))
+            }
+        }
+    }
+
+    /// Gradients of `loss` (a scalar computed by this model) for every variable. Use this rather
+    /// than `loss.backward()`: the dense weights' gradients bypass candle's store to save memory
+    /// (see `dense.rs`) and are put back here.
+    pub fn backward(&self, loss: &Tensor) -> Result<GradStore> {
+        // Contributions left by a `backward()` called directly are stale: drop them.
+        self.sink_mu.take();
+        self.sink_sigma.take();
+        let mut grads = loss.backward()?;
+        for (w, sink) in [
+            (&self.w_mu, &self.sink_mu),
+            (&self.w_sigma, &self.sink_sigma),
+        ] {
+            if let Some(g) = sink.take() {
+                // Terms outside the dense layers (the L2 term of `loss`) went to the store.
+                let g = match grads.remove(w) {
+                    Some(other) => (other + g)?,
+                    None => g,
+                };
+                grads.insert(w, g);
+            }
+        }
+        Ok(grads)
+    }
+
+    /// The adjoint of the mirror encoder convolution, for a tied decoder block.
+    fn tied_conv(&self, block: &ConvBlock) -> Result<Option<GraphConv>> {
+        if !matches!(block.weights, Weights::Tied) {
+            return Ok(None);
+        }
+        let enc = &self.enc[block.spec.index];
+        let (Weights::Own(conv), Some(op_t)) = (&enc.weights, &self.levels[block.spec.level].op_t)
+        else {
+            return Err(self.plan_error());
+        };
+        Ok(Some(conv.adjoint(op_t)?))
+    }
+
+    fn flat_width(&self) -> usize {
+        self.vertex_counts[self.vertex_counts.len() - 1] * self.config.channels
+    }
+
+    fn plan_error(&self) -> VaeError {
+        VaeError::shape(
+            "MeshVae",
+            format!("internal: layers do not match {}", self.config.structure),
+        )
+    }
+
+    fn check_input(&self, op: &'static str, x: &Tensor) -> Result<()> {
+        let v = self.vertex_count();
+        let ok_shape = matches!(x.dims(), &[b, xv, c] if b > 0 && xv == v && c == FEATURE_CHANNELS);
+        if !ok_shape {
+            return Err(VaeError::shape(
+                op,
+                format!(
+                    "features of shape {:?}; the model expects [B ≥ 1, {v}, {FEATURE_CHANNELS}]",
+                    x.dims()
+                ),
+            ));
+        }
+        self.check_kind(op, x)
+    }
+
+    /// Checks z (or ε) is `[B, latent]` (with B = `batch` if given) and returns B.
+    fn check_latent(&self, op: &'static str, z: &Tensor, batch: Option<usize>) -> Result<usize> {
+        let latent = self.config.latent;
+        match z.dims() {
+            &[b, l] if b > 0 && l == latent && batch.is_none_or(|want| want == b) => {
+                self.check_kind(op, z)?;
+                Ok(b)
+            }
+            dims => Err(VaeError::shape(
+                op,
+                format!(
+                    "shape {dims:?}; expected [{}, {latent}]",
+                    batch.map_or("B ≥ 1".to_owned(), |b| b.to_string())
+                ),
+            )),
+        }
+    }
+
+    fn check_kind(&self, op: &'static str, t: &Tensor) -> Result<()> {
+        if t.dtype() != self.dtype || !t.device().same_device(&self.device) {
+            return Err(VaeError::shape(
+                op,
+                format!(
+                    "tensor of {:?} on {:?}; the model is {:?} on {:?}",
+                    t.dtype(),
+                    t.device().location(),
+                    self.dtype,
+                    self.device.location()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;

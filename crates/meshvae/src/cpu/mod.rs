@@ -1,0 +1,169 @@
+//! [`Engine`]: the training step (forward, backward, Adam) written by hand for the CPU over
+//! buffers allocated once, instead of candle's autograd.
+//!
+//! Why: with candle every op returns a fresh tensor (fresh pages, zeroed by the kernel on first
+//! touch), gradients accumulate as `zeros + g`, and element-wise ops run as separate passes;
+//! on horse-gallop that overhead, not the graph convolutions, dominated a step. The engine owns
+//! every activation, gradient and scratch buffer (sized for the largest batch), keeps them
+//! `[V, C, B]` (the graph kernels' own layout: no transposes between layers), fuses batch norm
+//! with tanh and the loss with its gradient, and hands its gradient slices to a fused Adam pass.
+//! The two dense weights' gradients (each as large as its weights: 19 MB on horse-gallop, 97 MB
+//! on elephant-gallop) are never stored whole: Adam's pass makes them block by block from the
+//! activations the backward pass keeps, and updates each block while it is in cache.
+//! Training also evaluates the validation and test losses on the same buffers
+//! ([`Engine::rec_error`]: z = μ, the batch norms' running statistics).
+//!
+//! It covers the unconditional model with Chebyshev convolutions (any K ≤ 8) or spatial ones
+//! (the Chebyshev kernel with K = 2 on D⁻¹A), own decoder weights, and every pooling (graph pooling is a max pool over overlapping member lists,
+//! remeshing is mean pooling), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
+//! anything else is declined, and training then uses candle's path, which stays the reference
+//! (`tests.rs` compares the two).
+//!
+//! This folder holds the engine (here), its network of layers over reused buffers (`net.rs`;
+//! `net/`: built from a [`MeshVae`], per-layer forward and backward, convolution weights,
+//! inference), its element-wise kernels (`kernels.rs`), the matrix products (`gemm.rs`) and
+//! [`wide`](wide::wide) (AVX2 + FMA loops, also used by Adam's update). It imports `train/` only
+//! for the [`Adam`] it steps and the [`LossWeights`] it reads.
+
+mod gemm;
+mod kernels;
+mod net;
+#[cfg(test)]
+mod tests;
+pub(crate) mod wide;
+
+use crate::candle::model::MeshVae;
+use crate::error::{Result, VaeError};
+use crate::train::adam::Adam;
+use crate::train::loss::LossWeights;
+use candle_core::{DType, Tensor};
+use net::Net;
+
+/// The float types the engine runs on (f32, f64).
+pub(crate) trait Scalar: crate::candle::ops::Real + spectral_conv::Float {}
+impl Scalar for f32 {}
+impl Scalar for f64 {}
+
+/// The value in f64 (the two float traits both name this method).
+#[inline(always)]
+pub(crate) fn f64_of<T: Scalar>(x: T) -> f64 {
+    crate::candle::ops::Real::to_f64(x)
+}
+
+/// An f64 in the float type.
+#[inline(always)]
+pub(crate) fn of<T: Scalar>(x: f64) -> T {
+    <T as crate::candle::ops::Real>::of(x)
+}
+
+/// The loss terms of one engine step, weighted as in [`crate::Loss`] (the L2 term comes from
+/// [`Engine::apply_adam`], which reads the weights anyway).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepLoss {
+    /// w_rec · batch mean of Σ (x − x̂)².
+    pub rec: f64,
+    /// w_kl · batch mean of the KL divergence.
+    pub kl: f64,
+}
+
+#[derive(Debug)]
+enum Typed {
+    F32(Net<f32>),
+    F64(Net<f64>),
+}
+
+/// The hand-written training step of one model (see the module documentation).
+#[derive(Debug)]
+pub struct Engine {
+    net: Typed,
+}
+
+impl Engine {
+    /// Why the engine cannot train `model`, or `None` if it can.
+    pub fn unsupported(model: &MeshVae) -> Option<String> {
+        let c = model.config();
+        if !model.device().is_cpu() {
+            return Some("the model is not on the CPU".into());
+        }
+        if !matches!(model.dtype(), DType::F32 | DType::F64) {
+            return Some(format!("dtype {:?}", model.dtype()));
+        }
+        if c.is_conditional() {
+            return Some("conditional models".into());
+        }
+        if c.tie_decoder_convs {
+            return Some("tied decoder convolutions".into());
+        }
+        if c.k > 8 {
+            return Some(format!("K = {} (at most 8)", c.k));
+        }
+        None
+    }
+
+    /// An engine for `model` with buffers for batches of up to `max_batch` meshes; an error
+    /// saying why when [`Self::unsupported`] declines the model (training asks first and says
+    /// which path it takes, `crate::Executor`).
+    pub fn new(model: &MeshVae, max_batch: usize) -> Result<Self> {
+        if let Some(why) = Self::unsupported(model) {
+            return Err(VaeError::argument(
+                "model",
+                format!("the CPU engine does not cover {why}"),
+            ));
+        }
+        if max_batch == 0 {
+            return Err(VaeError::argument("max_batch", "must be at least 1"));
+        }
+        let net = match model.dtype() {
+            DType::F32 => Typed::F32(Net::build(model, max_batch)?),
+            _ => Typed::F64(Net::build(model, max_batch)?),
+        };
+        Ok(Self { net })
+    }
+
+    /// Forward and backward pass on features x `[B, V, 9]` and noise ε `[B, latent]` (the
+    /// model's dtype, CPU) in train mode: updates the batch norms' running statistics as the
+    /// candle path does and leaves every trainable variable's gradient (of w_rec·rec + w_kl·KL,
+    /// without the L2 term) in the engine.
+    pub fn forward_backward(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        eps: &Tensor,
+        weights: &LossWeights,
+    ) -> Result<StepLoss> {
+        match &mut self.net {
+            Typed::F32(n) => n.step(model, x, eps, weights),
+            Typed::F64(n) => n.step(model, x, eps, weights),
+        }
+    }
+
+    /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]` in inference mode (z = μ, the
+    /// batch norms' running statistics): [`MeshVae::rec_error`] without candle's per-op
+    /// allocations. Does not disturb the last [`Self::forward_backward`]'s gradients.
+    pub fn rec_error(&mut self, model: &MeshVae, x: &Tensor, weights: &LossWeights) -> Result<f64> {
+        match &mut self.net {
+            Typed::F32(n) => n.rec_error(model, x, weights),
+            Typed::F64(n) => n.rec_error(model, x, weights),
+        }
+    }
+
+    /// Adam's update from the gradients of the last [`Self::forward_backward`] plus the L2
+    /// term's gradient `l2 · θ` (as `Adam::step_with_l2`); returns the L2 term's value
+    /// l2 · Σ ½‖θ‖² of the weights before the update. `adam` must be built on
+    /// `model.trainable_vars()`.
+    pub fn apply_adam(&self, adam: &mut Adam, l2: f64) -> Result<f64> {
+        let half_sq = match &self.net {
+            Typed::F32(n) => n.apply_adam(adam, l2)?,
+            Typed::F64(n) => n.apply_adam(adam, l2)?,
+        };
+        Ok(half_sq * l2)
+    }
+
+    /// Copies of the last step's gradients, by variable name (for checks and tests).
+    pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
+        match &self.net {
+            Typed::F32(n) => n.gradients(),
+            Typed::F64(n) => n.gradients(),
+        }
+    }
+}

@@ -1,0 +1,542 @@
+//! The engine's network: its layer list, buffers, forward and backward passes (see `mod.rs`).
+
+use super::gemm::{Mat, matmul, matmul_serial};
+use super::kernels as k;
+use super::{Scalar, StepLoss, f64_of, of};
+use crate::candle::batch_norm::BatchNorm;
+use crate::candle::model::MeshVae;
+use crate::error::{Result, VaeError};
+use crate::net::config::FEATURE_CHANNELS;
+use crate::train::adam::{Adam, GradSource};
+use crate::train::loss::LossWeights;
+use candle_core::{Layout, Storage, Tensor, Var};
+use spectral_conv::{ChebKernel, MaxPool, SparseKernel};
+
+mod build;
+mod conv_weight;
+mod infer;
+mod node;
+
+use conv_weight::ConvWeight;
+use node::{BnStats, backward_node, forward_node};
+
+/// A batch norm's variables (indices into the trainable list) and its last batch statistics.
+#[derive(Debug)]
+struct Bn {
+    gamma: usize,
+    beta: usize,
+    running_mean: Var,
+    running_var: Var,
+    mean: Vec<f64>,
+    var: Vec<f64>,
+    inv_std: Vec<f64>,
+}
+
+impl Bn {
+    /// The running mean and variance, as inference normalises with them.
+    fn running_stats(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        let read = |v: &Var| -> Result<Vec<f64>> {
+            Ok(v.as_tensor().to_dtype(candle_core::DType::F64)?.to_vec1()?)
+        };
+        Ok((read(&self.running_mean)?, read(&self.running_var)?))
+    }
+}
+
+/// conv → [batch norm] → [tanh]. Buffers are indices into [`Acts`]; `pre` (the convolution's
+/// output) equals `out` without batch norm (tanh then runs in place).
+#[derive(Debug)]
+struct Conv {
+    kernel: ChebKernel,
+    v: usize,
+    ci: usize,
+    co: usize,
+    weight: ConvWeight,
+    bn: Option<Bn>,
+    tanh: bool,
+    input: usize,
+    terms: usize,
+    pre: usize,
+    out: usize,
+    /// The gradient at the input is wanted (not for the network's input data).
+    need_dx: bool,
+}
+
+#[derive(Debug)]
+enum PoolOp {
+    Sparse(SparseKernel),
+    Max(MaxPool, Vec<u32>),
+    Identity,
+}
+
+/// A pooling or de-pooling step `[v_in, c, B]` → `[v_out, c, B]`.
+#[derive(Debug)]
+struct Pool {
+    op: PoolOp,
+    v_in: usize,
+    v_out: usize,
+    c: usize,
+    input: usize,
+    out: usize,
+}
+
+#[derive(Debug)]
+enum Node {
+    Conv(Conv),
+    Pool(Pool),
+}
+
+impl Node {
+    fn out(&self) -> usize {
+        match self {
+            Node::Conv(c) => c.out,
+            Node::Pool(p) => p.out,
+        }
+    }
+}
+
+/// The dense layers' variables (indices into the trainable list).
+#[derive(Debug)]
+struct DenseVars {
+    w_mu: usize,
+    b_mu: usize,
+    w_sigma: usize,
+    b_sigma: usize,
+    b_dec: usize,
+}
+
+/// Activation buffers, each sized for the largest batch.
+#[derive(Debug)]
+struct Acts<T>(Vec<Vec<T>>);
+
+impl<T: Scalar> Acts<T> {
+    fn add(&mut self, len: usize) -> usize {
+        self.0.push(vec![of(0.0); len]);
+        self.0.len() - 1
+    }
+
+    /// Buffer `i` moved out (put it back with [`Self::put`]), so that others can be borrowed.
+    fn take(&mut self, i: usize) -> Vec<T> {
+        std::mem::take(&mut self.0[i])
+    }
+
+    fn put(&mut self, i: usize, v: Vec<T>) {
+        self.0[i] = v;
+    }
+}
+
+/// The latent side, `[B, latent]` row-major each.
+#[derive(Debug)]
+struct Latent<T> {
+    mu: Vec<T>,
+    sig: Vec<T>,
+    sigma: Vec<T>,
+    z: Vec<T>,
+    eps: Vec<T>,
+    dz: Vec<T>,
+    dmu: Vec<T>,
+    ds: Vec<T>,
+}
+
+/// The network for one float type.
+#[derive(Debug)]
+pub(super) struct Net<T> {
+    names: Vec<String>,
+    vars: Vec<Var>,
+    grads: Vec<Vec<T>>,
+    max_batch: usize,
+    v0: usize,
+    latent: usize,
+    /// V_L · C: the flattened coarse features.
+    flat: usize,
+    enc: Vec<Node>,
+    dec: Vec<Node>,
+    dense: DenseVars,
+    acts: Acts<T>,
+    x_buf: usize,
+    enc_out: usize,
+    dec_in: usize,
+    x_hat: usize,
+    lat: Latent<T>,
+    /// ∂L/∂(the decoder's dense output) `[V_L·C, B]`, kept for the dense weights' gradient.
+    dec_grad: Vec<T>,
+    /// Gradient ping-pong buffers and the convolutions' backward work buffer.
+    ga: Vec<T>,
+    gb: Vec<T>,
+    work: Vec<T>,
+    /// Batch size of the last step (0: no step yet).
+    batch: usize,
+    /// The full-resolution vertices' order in the engine's buffers (`order[p]`: the template
+    /// vertex at position p), when they are renumbered for locality (see `build.rs`).
+    order: Option<Vec<u32>>,
+}
+
+fn internal(what: impl Into<String>) -> VaeError {
+    VaeError::shape("Engine", what.into())
+}
+
+/// The contiguous data of a CPU storage of type `T`.
+fn cpu_slice<'a, T: Scalar>(s: &'a Storage, l: &Layout, what: &str) -> Result<&'a [T]> {
+    let Storage::Cpu(cpu) = s else {
+        return Err(internal(format!("{what} is not on the CPU")));
+    };
+    let data = T::cpu(cpu).ok_or_else(|| internal(format!("{what} has another dtype")))?;
+    let (lo, hi) = l
+        .contiguous_offsets()
+        .ok_or_else(|| internal(format!("{what} is not contiguous")))?;
+    Ok(&data[lo..hi])
+}
+
+/// Runs `f` on the CPU data of the model's variables (read-locked meanwhile).
+fn with_weights<T: Scalar, R>(
+    vars: &[Var],
+    names: &[String],
+    f: impl FnOnce(&[&[T]]) -> Result<R>,
+) -> Result<R> {
+    let guards: Vec<_> = vars
+        .iter()
+        .map(|v| v.as_tensor().storage_and_layout())
+        .collect();
+    let w: Vec<&[T]> = guards
+        .iter()
+        .zip(names)
+        .map(|((s, l), name)| cpu_slice::<T>(s, l, name))
+        .collect::<Result<_>>()?;
+    f(&w)
+}
+
+impl<T: Scalar> Net<T> {
+    fn check_model(&self, model: &MeshVae) -> Result<()> {
+        if model.vertex_count() != self.v0 || model.trainable_vars().len() != self.vars.len() {
+            return Err(internal(
+                "the model is not the one the engine was built for",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks the inputs' shapes and copies them into the engine's buffers; returns B.
+    fn load_inputs(&mut self, x: &Tensor, eps: &Tensor) -> Result<usize> {
+        let dims = x.dims();
+        let batch = match dims {
+            &[b, v, c] if b >= 1 && v == self.v0 && c == FEATURE_CHANNELS => b,
+            _ => {
+                return Err(VaeError::shape(
+                    "Engine::forward_backward",
+                    format!(
+                        "features of shape {dims:?}; expected [B ≥ 1, {}, {FEATURE_CHANNELS}]",
+                        self.v0
+                    ),
+                ));
+            }
+        };
+        if batch > self.max_batch || eps.dims() != [batch, self.latent] {
+            return Err(VaeError::shape(
+                "Engine::forward_backward",
+                format!(
+                    "batch of {batch} (at most {}), ε of shape {:?} (expected [{batch}, {}])",
+                    self.max_batch,
+                    eps.dims(),
+                    self.latent
+                ),
+            ));
+        }
+        let (x, eps) = (x.contiguous()?, eps.contiguous()?);
+        let (xs, xl) = x.storage_and_layout();
+        let xd = cpu_slice::<T>(&xs, xl, "the features")?;
+        let n = self.v0 * FEATURE_CHANNELS * batch;
+        k::to_vcb(
+            xd,
+            &mut self.acts.0[self.x_buf][..n],
+            (batch, self.v0, FEATURE_CHANNELS),
+            self.order.as_deref(),
+        );
+        let (es, el) = eps.storage_and_layout();
+        let ed = cpu_slice::<T>(&es, el, "ε")?;
+        self.lat.eps[..ed.len()].copy_from_slice(ed);
+        Ok(batch)
+    }
+
+    pub fn step(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        eps: &Tensor,
+        weights: &LossWeights,
+    ) -> Result<StepLoss> {
+        self.check_model(model)?;
+        let batch = self.load_inputs(x, eps)?;
+        let (vars, names) = (self.vars.clone(), self.names.clone());
+        let loss = with_weights(&vars, &names, |w| {
+            let loss = self.forward(w, batch, weights)?;
+            self.backward(w, batch, weights)?;
+            Ok(loss)
+        })?;
+        self.batch = batch;
+        self.update_running_stats()?;
+        Ok(loss)
+    }
+
+    fn forward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) -> Result<StepLoss> {
+        for node in &mut self.enc {
+            forward_node(node, &mut self.acts, w, batch, BnStats::Batch)?;
+        }
+        let kl = self.latent_forward(w, batch);
+        for node in &mut self.dec {
+            forward_node(node, &mut self.acts, w, batch, BnStats::Batch)?;
+        }
+        let n = self.v0 * FEATURE_CHANNELS * batch;
+        let coeff = 2.0 * weights.rec / batch as f64;
+        let sse = k::sse_grad(
+            &self.acts.0[self.x_hat][..n],
+            &self.acts.0[self.x_buf][..n],
+            &mut self.ga[..n],
+            coeff,
+        );
+        // Rounded to the model's precision, as candle's path reports them: a term that
+        // overflows f32 is infinite there too (and stops training before Adam runs).
+        let round = |v: f64| f64_of::<T>(of(v));
+        Ok(StepLoss {
+            rec: round(weights.rec * sse / batch as f64),
+            kl: round(weights.kl * kl),
+        })
+    }
+
+    /// μ, σ, z and the decoder's dense layer; returns the batch mean of the KL divergence.
+    fn latent_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
+        let (l, kf) = (self.latent, self.flat);
+        let d = &self.dense;
+        let h = &self.acts.0[self.enc_out][..kf * batch];
+        let lat = &mut self.lat;
+        let h_rows = Mat::col_major(h, batch);
+        let (wm, ws) = (
+            Mat::row_major(w[d.w_mu], l),
+            Mat::row_major(w[d.w_sigma], l),
+        );
+        matmul(&mut lat.mu, (l, 1), h_rows, wm, (batch, l, kf), false);
+        // The pre-activation of σ goes into `sig` first.
+        matmul(&mut lat.sig, (l, 1), h_rows, ws, (batch, l, kf), false);
+        let mut kl = 0.0;
+        let two: T = of(2.0);
+        for i in 0..batch * l {
+            let j = i % l;
+            let mu = lat.mu[i] + w[d.b_mu][j];
+            let s = f64_of(lat.sig[i] + w[d.b_sigma][j]);
+            let sig: T = of(1.0 / (1.0 + (-s).exp()));
+            let sigma = crate::candle::ops::Real::sqrt(sig * two);
+            lat.mu[i] = mu;
+            lat.sig[i] = sig;
+            lat.sigma[i] = sigma;
+            lat.z[i] = mu + sigma * lat.eps[i];
+            let (m, sg) = (f64_of(mu), f64_of(sigma));
+            let var = sg * sg;
+            kl += m * m + var - (var + 1e-8).ln() - 1.0;
+        }
+        // The decoder's dense layer: [K, B] = W_μ zᵀ + b_dec.
+        let dec = &mut self.acts.0[self.dec_in][..kf * batch];
+        let zt = Mat::col_major(&lat.z[..batch * l], l);
+        matmul(dec, (batch, 1), wm, zt, (kf, batch, l), false);
+        k::add_row_bias(dec, w[d.b_dec], batch);
+        0.5 * kl / batch as f64
+    }
+
+    /// Back-propagates `ga` through one chain of nodes, last node first, leaving the gradient
+    /// with respect to the chain's input in `ga`.
+    fn backward_chain(&mut self, chain: Chain, w: &[&[T]], batch: usize) -> Result<()> {
+        let nodes = match chain {
+            Chain::Encoder => &mut self.enc,
+            Chain::Decoder => &mut self.dec,
+        };
+        for node in nodes.iter_mut().rev() {
+            let swap = backward_node(
+                node,
+                &self.acts,
+                w,
+                batch,
+                &mut self.grads,
+                [&mut self.ga, &mut self.gb, &mut self.work],
+            )?;
+            if swap {
+                std::mem::swap(&mut self.ga, &mut self.gb);
+            }
+        }
+        Ok(())
+    }
+
+    fn backward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) -> Result<()> {
+        // `ga` holds ∂L/∂x̂ (written with the loss).
+        self.backward_chain(Chain::Decoder, w, batch)?;
+        self.latent_backward(w, batch, weights);
+        std::mem::swap(&mut self.ga, &mut self.gb);
+        self.backward_chain(Chain::Encoder, w, batch)?;
+        Ok(())
+    }
+
+    /// From ∂L/∂(dense output) in `ga` to the dense biases' gradients and ∂L/∂h in `gb`. The
+    /// dense weights' gradients are left to [`Self::dense_grad_rows`]: what they need (h, the
+    /// decoder's output gradient, z, ∂L/∂μ, ∂L/∂s) stays in the buffers.
+    fn latent_backward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) {
+        let (l, kf) = (self.latent, self.flat);
+        let d = &self.dense;
+        let g = &self.ga[..kf * batch];
+        k::row_sums(g, batch, &mut self.grads[d.b_dec]);
+        self.dec_grad[..kf * batch].copy_from_slice(g);
+        let lat = &mut self.lat;
+        let (wm, ws) = (
+            Mat::row_major(w[d.w_mu], l),
+            Mat::row_major(w[d.w_sigma], l),
+        );
+        // dz = g W_μ (the tied use).
+        matmul(
+            &mut lat.dz,
+            (l, 1),
+            Mat::col_major(g, batch),
+            wm,
+            (batch, l, kf),
+            false,
+        );
+        // Through z = μ + σ ε, the KL term and σ = √(2·sigmoid(s)).
+        let c = weights.kl / batch as f64;
+        for i in 0..batch * l {
+            let (mu, sigma, sig) = (f64_of(lat.mu[i]), f64_of(lat.sigma[i]), f64_of(lat.sig[i]));
+            let dz = f64_of(lat.dz[i]);
+            let dmu = dz + c * mu;
+            let dsigma = dz * f64_of(lat.eps[i]) + c * (sigma - sigma / (sigma * sigma + 1e-8));
+            lat.dmu[i] = of(dmu);
+            lat.ds[i] = of(dsigma / sigma * sig * (1.0 - sig));
+        }
+        for (bias, src) in [(d.b_mu, &lat.dmu), (d.b_sigma, &lat.ds)] {
+            for j in 0..l {
+                let s: f64 = (0..batch).map(|b| f64_of(src[b * l + j])).sum();
+                self.grads[bias][j] = of(s);
+            }
+        }
+        let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
+        let gb = &mut self.gb[..kf * batch];
+        let (dmu_cols, ds_cols) = (Mat::col_major(dmu, l), Mat::col_major(ds, l));
+        matmul(gb, (batch, 1), wm, dmu_cols, (kf, batch, l), false);
+        matmul(gb, (batch, 1), ws, ds_cols, (kf, batch, l), true);
+    }
+
+    /// Rows `first..` of the last step's gradient of the dense weight `var` (`w_mu` or
+    /// `w_sigma`, row-major `[V_L·C, latent]`) into `out` (whole rows), on this thread:
+    /// dW_μ = g zᵀ + h (∂L/∂μ)ᵀ (the decoder's tied use, then the encoder's), dW_σ = h (∂L/∂s)ᵀ.
+    fn dense_grad_rows(&self, var: usize, first: usize, out: &mut [T]) {
+        let (l, batch) = (self.latent, self.batch);
+        let rows = out.len() / l;
+        let lat = &self.lat;
+        let span = first * batch..(first + rows) * batch;
+        fn block<T>(buf: &[T], span: std::ops::Range<usize>, batch: usize) -> Mat<'_, T> {
+            Mat::row_major(&buf[span], batch)
+        }
+        let h = block(&self.acts.0[self.enc_out], span.clone(), batch);
+        let dims = (rows, l, batch);
+        let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
+        if var == self.dense.w_mu {
+            let z = Mat::row_major(&lat.z[..batch * l], l);
+            matmul_serial(
+                out,
+                (l, 1),
+                block(&self.dec_grad, span, batch),
+                z,
+                dims,
+                false,
+            );
+            matmul_serial(out, (l, 1), h, Mat::row_major(dmu, l), dims, true);
+        } else {
+            matmul_serial(out, (l, 1), h, Mat::row_major(ds, l), dims, false);
+        }
+    }
+
+    /// r ← 0.9·r + 0.1·batch for every batch norm (as `BatchNorm` in train mode).
+    fn update_running_stats(&self) -> Result<()> {
+        for node in self.enc.iter().chain(&self.dec) {
+            let Node::Conv(Conv { bn: Some(bn), .. }) = node else {
+                continue;
+            };
+            for (running, batch) in [(&bn.running_mean, &bn.mean), (&bn.running_var, &bn.var)] {
+                let old: Vec<f64> = running
+                    .as_tensor()
+                    .to_dtype(candle_core::DType::F64)?
+                    .to_vec1()?;
+                let next: Vec<f64> = old
+                    .iter()
+                    .zip(batch)
+                    .map(|(r, b)| BatchNorm::DECAY * r + (1.0 - BatchNorm::DECAY) * b)
+                    .collect();
+                let t = Tensor::from_vec(next, old.len(), running.device())?;
+                running.set(&t.to_dtype(running.dtype())?)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the full-resolution vertices run in another order than the template's.
+    #[cfg(test)]
+    pub fn renumbered(&self) -> bool {
+        self.order
+            .as_ref()
+            .is_some_and(|o| o.iter().enumerate().any(|(p, &v)| p != v as usize))
+    }
+
+    pub fn apply_adam(&self, adam: &mut Adam, l2: f64) -> Result<f64> {
+        if self.batch == 0 {
+            return Err(internal("apply_adam before any forward_backward"));
+        }
+        if !adam.names().eq(self.names.iter().map(String::as_str)) {
+            return Err(VaeError::argument(
+                "adam",
+                "its variables are not the model's trainable variables in order",
+            ));
+        }
+        let fill =
+            |var: usize| move |first: usize, out: &mut [T]| self.dense_grad_rows(var, first, out);
+        let (fill_mu, fill_sigma) = (fill(self.dense.w_mu), fill(self.dense.w_sigma));
+        let grads: Vec<GradSource<T>> = (0..self.grads.len())
+            .map(|i| match i {
+                i if i == self.dense.w_mu => GradSource::Rows {
+                    row_len: self.latent,
+                    fill: &fill_mu,
+                },
+                i if i == self.dense.w_sigma => GradSource::Rows {
+                    row_len: self.latent,
+                    fill: &fill_sigma,
+                },
+                i => GradSource::Slice(&self.grads[i]),
+            })
+            .collect();
+        adam.step_with_sources(&grads, l2)
+    }
+
+    pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
+        self.names
+            .iter()
+            .zip(&self.vars)
+            .zip(&self.grads)
+            .enumerate()
+            .map(|(i, ((n, v), g))| {
+                let dense = [self.dense.w_mu, self.dense.w_sigma].contains(&i);
+                let made;
+                let g = if dense {
+                    let mut all = vec![of(0.0); v.elem_count()];
+                    if self.batch > 0 {
+                        self.dense_grad_rows(i, 0, &mut all);
+                    }
+                    made = all;
+                    &made
+                } else {
+                    g
+                };
+                let values: Vec<f64> = g.iter().map(|&x| f64_of(x)).collect();
+                let t = Tensor::from_vec(values, v.shape(), v.device())?.to_dtype(v.dtype())?;
+                Ok((n.clone(), t))
+            })
+            .collect()
+    }
+}
+
+/// Which node chain [`Net::backward_chain`] walks.
+#[derive(Clone, Copy)]
+enum Chain {
+    Encoder,
+    Decoder,
+}

@@ -1,0 +1,325 @@
+//! The engine against candle's autograd (the reference): loss terms, every gradient, the batch
+//! norms' running statistics, whole training runs, and bit-reproducibility across thread
+//! counts.
+
+use super::*;
+use crate::candle::batch_norm::Mode;
+use crate::net::config::{ConvKind, ModelConfig};
+use crate::numerics::rng::Rng;
+use candle_core::Device;
+use mesh_hierarchy::Hierarchy;
+use mesh_hierarchy::Pooler;
+
+fn hierarchy(config: &ModelConfig) -> Hierarchy {
+    let sphere = qem_simplify::shapes::icosphere(2);
+    Hierarchy::build(&sphere, &config.hierarchy_config()).unwrap()
+}
+
+/// Two identical models (same seed): one for each path, since both move running statistics.
+fn models(config: &ModelConfig, dtype: DType) -> (MeshVae, MeshVae) {
+    let h = hierarchy(config);
+    let m = || MeshVae::with_dtype(config, &h, &Device::Cpu, dtype, 7).unwrap();
+    (m(), m())
+}
+
+fn inputs(model: &MeshVae, batch: usize, seed: u64) -> (Tensor, Tensor) {
+    let mut rng = Rng::new(seed);
+    let v = model.vertex_count();
+    let x: Vec<f64> = rng
+        .normals(batch * v * 9)
+        .into_iter()
+        .map(|x| (0.5 * x).tanh())
+        .collect();
+    let x = Tensor::from_vec(x, (batch, v, 9), &Device::Cpu).unwrap();
+    let eps = rng
+        .normal_tensor((batch, model.latent()), &Device::Cpu)
+        .unwrap();
+    let dtype = model.dtype();
+    (x.to_dtype(dtype).unwrap(), eps.to_dtype(dtype).unwrap())
+}
+
+fn values(t: &Tensor) -> Vec<f64> {
+    t.flatten_all()
+        .unwrap()
+        .to_dtype(DType::F64)
+        .unwrap()
+        .to_vec1()
+        .unwrap()
+}
+
+/// max |a − b| / max(max |b|, floor).
+fn rel_diff(a: &[f64], b: &[f64], floor: f64) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(floor, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+/// One step on both paths; asserts the loss terms, gradients and running stats agree to `tol`.
+fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
+    let (reference, ours) = models(config, dtype);
+    let weights = LossWeights {
+        rec: 40.0,
+        kl: 3.0,
+        l2: 1.0,
+    };
+    let (x, eps) = inputs(&reference, batch, 3);
+    let loss = reference.training_loss(&x, &eps, &weights).unwrap();
+    let grads = reference.backward(&loss.total).unwrap();
+    let mut engine = Engine::new(&ours, batch + 2).unwrap();
+    let got = engine.forward_backward(&ours, &x, &eps, &weights).unwrap();
+    let case = format!(
+        "{} {} {:?} K={} {dtype:?}",
+        config.structure, config.conv, config.pool, config.k
+    );
+    // Mean-type poolings and sampling leave level 0 through a sparse operator: the engine then
+    // runs it renumbered, so these comparisons check the renumbering too.
+    let renumbered = match &engine.net {
+        Typed::F32(n) => n.renumbered(),
+        Typed::F64(n) => n.renumbered(),
+    };
+    let sparse_pool = matches!(
+        config.pool,
+        Pooler::Mean | Pooler::Qem | Pooler::Remesh | Pooler::Sampling
+    );
+    assert_eq!(renumbered, sparse_pool, "{case}: renumbered");
+    assert!(
+        (got.rec - loss.rec).abs() <= tol * loss.rec.abs(),
+        "{case}: rec {} vs {}",
+        got.rec,
+        loss.rec
+    );
+    assert!(
+        (got.kl - loss.kl).abs() <= tol * loss.kl.abs().max(1e-3),
+        "{case}: kl {} vs {}",
+        got.kl,
+        loss.kl
+    );
+    let ours_grads = engine.gradients().unwrap();
+    assert_eq!(ours_grads.len(), reference.trainable_vars().len());
+    for ((name, var), (gname, g)) in reference.trainable_vars().iter().zip(&ours_grads) {
+        assert_eq!(name, gname);
+        let want = values(grads.get(var.as_tensor()).unwrap());
+        let d = rel_diff(&values(g), &want, 1e-6);
+        assert!(d <= tol, "{case}: d{name} differs by {d:e} (relative)");
+        assert!(want.iter().any(|v| *v != 0.0), "{case}: d{name} is zero");
+    }
+    for ((name, a), (_, b)) in reference.state_vars().iter().zip(ours.state_vars()) {
+        let d = rel_diff(&values(b.as_tensor()), &values(a.as_tensor()), 1.0);
+        assert!(d <= tol, "{case}: running {name} differs by {d:e}");
+    }
+}
+
+#[test]
+fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
+    let mut configs = Vec::new();
+    // Every pooling, graph and remesh included.
+    assert!(Pooler::ALL.contains(&Pooler::Graph) && Pooler::ALL.contains(&Pooler::Remesh));
+    for structure in ["CCPC", "CPCPC"] {
+        for pool in Pooler::ALL {
+            configs.push(ModelConfig {
+                structure: structure.parse().unwrap(),
+                pool,
+                channels: 5,
+                latent: 6,
+                ..Default::default()
+            });
+        }
+    }
+    // Spatial convolutions (the kernel with K = 2 on D⁻¹A, two weight variables), pooled and
+    // not (the paper's "Only Spatial Conv." column).
+    for pool in [Pooler::Mean, Pooler::None] {
+        configs.push(ModelConfig {
+            conv: ConvKind::Spatial,
+            pool,
+            channels: 5,
+            latent: 6,
+            ..Default::default()
+        });
+    }
+    for k in [1, 2, 4] {
+        configs.push(ModelConfig {
+            k,
+            channels: 4,
+            latent: 5,
+            ..Default::default()
+        });
+    }
+    // The authors' variant (tanh on the last encoder convolution) and no batch norm.
+    configs.push(ModelConfig {
+        last_encoder_linear: false,
+        latent: 5,
+        ..Default::default()
+    });
+    configs.push(ModelConfig {
+        batch_norm: false,
+        structure: "CPC".parse().unwrap(),
+        latent: 5,
+        ..Default::default()
+    });
+    for config in &configs {
+        compare_step(config, DType::F64, 3, 1e-10);
+    }
+    // A batch that fills the 8-lane sums of the batch norms twice and leaves a tail.
+    compare_step(&configs[0], DType::F64, 19, 1e-10);
+}
+
+#[test]
+fn f32_step_is_close_to_candle() {
+    for conv in [ConvKind::Spectral, ConvKind::Spatial] {
+        let config = ModelConfig {
+            conv,
+            latent: 16,
+            ..Default::default()
+        };
+        compare_step(&config, DType::F32, 4, 2e-3);
+    }
+}
+
+#[test]
+fn inference_error_equals_candle_and_leaves_the_step_alone() {
+    let weights = LossWeights::default();
+    for (pool, dtype, tol) in Pooler::ALL.iter().map(|&p| (p, DType::F64, 1e-10)).chain([(
+        Pooler::Mean,
+        DType::F32,
+        1e-5,
+    )]) {
+        let config = ModelConfig {
+            pool,
+            channels: 5,
+            latent: 6,
+            ..Default::default()
+        };
+        let (model, _) = models(&config, dtype);
+        let mut engine = Engine::new(&model, 5).unwrap();
+        let mut adam = Adam::new(model.trainable_vars(), 1e-2).unwrap();
+        // A few steps, so that the running statistics are neither 0/1 nor a batch's own.
+        for seed in 0..3 {
+            let (x, eps) = inputs(&model, 5, seed);
+            engine.forward_backward(&model, &x, &eps, &weights).unwrap();
+            engine.apply_adam(&mut adam, weights.l2).unwrap();
+        }
+        let (x, eps) = inputs(&model, 4, 9);
+        engine.forward_backward(&model, &x, &eps, &weights).unwrap();
+        let before = engine.gradients().unwrap();
+        // Another batch size than the step's, and one mesh alone (batch statistics would be 0).
+        for batch in [3, 1] {
+            let (x, _) = inputs(&model, batch, 11);
+            let want = model.rec_error(&x, &weights).unwrap();
+            let got = engine.rec_error(&model, &x, &weights).unwrap();
+            assert!(
+                (got - want).abs() <= tol * want.abs(),
+                "{pool:?} {dtype:?} B={batch}: {got} vs {want}"
+            );
+        }
+        for ((name, a), (_, b)) in before.iter().zip(&engine.gradients().unwrap()) {
+            assert_eq!(values(a), values(b), "{pool:?}: gradient of {name} changed");
+        }
+    }
+}
+
+/// Runs `steps` Adam steps on one path; returns the weights.
+fn train(config: &ModelConfig, engine: bool, steps: usize) -> Vec<Vec<f64>> {
+    let (model, _) = models(config, DType::F64);
+    let weights = LossWeights::default();
+    let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
+    let mut e = engine.then(|| Engine::new(&model, 4).unwrap());
+    for step in 0..steps {
+        // The last batch is smaller, as at the end of an epoch.
+        let batch = if step + 1 == steps { 3 } else { 4 };
+        let (x, eps) = inputs(&model, batch, 10 + step as u64);
+        match e.as_mut() {
+            Some(e) => {
+                e.forward_backward(&model, &x, &eps, &weights).unwrap();
+                e.apply_adam(&mut adam, weights.l2).unwrap();
+            }
+            None => {
+                let loss = model.training_loss(&x, &eps, &weights).unwrap();
+                let grads = model.backward(&loss.total).unwrap();
+                adam.step_with_l2(&grads, weights.l2).unwrap();
+            }
+        }
+    }
+    let mut out: Vec<Vec<f64>> = model
+        .trainable_vars()
+        .iter()
+        .map(|(_, v)| values(v.as_tensor()))
+        .collect();
+    out.extend(
+        model
+            .state_vars()
+            .iter()
+            .map(|(_, v)| values(v.as_tensor())),
+    );
+    out
+}
+
+#[test]
+fn training_steps_match_candle_and_repeat_bit_for_bit_on_any_thread_count() {
+    // Max-type poolings route gradients through recorded selections; graph pooling's overlap
+    // makes the backward pass sum several of them per vertex.
+    for pool in [Pooler::Max, Pooler::Graph] {
+        let config = ModelConfig {
+            structure: "CPCPC".parse().unwrap(),
+            pool,
+            channels: 4,
+            latent: 6,
+            ..Default::default()
+        };
+        let reference = train(&config, false, 4);
+        let ours = train(&config, true, 4);
+        for (a, b) in ours.iter().zip(&reference) {
+            assert!(rel_diff(a, b, 1e-3) < 1e-9, "{pool}");
+        }
+        let threads = |n| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+        };
+        let one = threads(1).install(|| train(&config, true, 4));
+        let three = threads(3).install(|| train(&config, true, 4));
+        assert_eq!(one, three, "{pool}");
+        assert_eq!(one, ours, "{pool}");
+    }
+}
+
+#[test]
+fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
+    let tied = ModelConfig {
+        tie_decoder_convs: true,
+        latent: 4,
+        ..Default::default()
+    };
+    let (model, _) = models(&tied, DType::F32);
+    assert!(Engine::unsupported(&model).unwrap().contains("tied"));
+    let err = Engine::new(&model, 2).unwrap_err().to_string();
+    assert!(
+        err.contains("does not cover") && err.contains("tied"),
+        "{err}"
+    );
+
+    let config = ModelConfig {
+        latent: 4,
+        ..Default::default()
+    };
+    let (model, _) = models(&config, DType::F64);
+    assert!(Engine::new(&model, 0).is_err());
+    let mut engine = Engine::new(&model, 2).unwrap();
+    let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
+    assert!(engine.apply_adam(&mut adam, 1.0).is_err(), "no step yet");
+    let (x, eps) = inputs(&model, 3, 1);
+    let w = LossWeights::default();
+    let err = engine.forward_backward(&model, &x, &eps, &w).unwrap_err();
+    assert!(err.to_string().contains("at most 2"), "{err}");
+    let (x, eps) = inputs(&model, 2, 1);
+    let short = x.narrow(1, 0, 10).unwrap();
+    assert!(engine.forward_backward(&model, &short, &eps, &w).is_err());
+    let wrong = x.to_dtype(DType::F32).unwrap();
+    assert!(engine.forward_backward(&model, &wrong, &eps, &w).is_err());
+    // The model still decodes (the engine left its weights usable).
+    engine.forward_backward(&model, &x, &eps, &w).unwrap();
+    assert!(model.decode(&eps, Mode::Eval).is_ok());
+}

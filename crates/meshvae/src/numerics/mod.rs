@@ -1,0 +1,7 @@
+//! Numerics that know nothing of meshes or of the network: the seeded random stream every draw
+//! of a run comes from ([`rng::Rng`]), principal components and the symmetric eigensolver
+//! ([`pca`](pca::pca)), and t-SNE ([`tsne`](tsne::tsne)) for the embeddings.
+
+pub(crate) mod pca;
+pub(crate) mod rng;
+pub(crate) mod tsne;
