@@ -155,7 +155,7 @@ impl Split {
 
     /// Moves round(`fraction` · training count) training meshes, drawn from `seed`, to the
     /// validation set: when `fraction` is positive at least one, and at least
-    /// [`MIN_VALIDATION`] once there are ten training meshes (a validation set of one pose
+    /// `MIN_VALIDATION` (2) once there are ten training meshes (a validation set of one pose
     /// chose checkpoints far from the best: on horse-gallop's 12 training shapes, seed 2, test
     /// RMS 0.0346 with one validation shape against 0.0257 with two); never mesh 0 and never
     /// the last training mesh. A split that already has validation meshes (given lists) is returned unchanged.
