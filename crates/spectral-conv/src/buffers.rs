@@ -15,6 +15,7 @@ use crate::layout::{Blocks, Io};
 use crate::max_kernel::{max_pool, max_unpool};
 use crate::pool::MaxPool;
 use crate::spmm::SparseOp;
+use sparse_csr::CsrMatrix;
 use std::sync::Arc;
 
 /// The float types of the buffer-level kernels: f32 and f64 (sealed: the kernels' own trait).
@@ -41,6 +42,22 @@ fn check_len(op: &'static str, what: &str, got: usize, want: usize) -> Result<()
     ))
 }
 
+/// The kernels index vertices with u32.
+fn check_u32(op: &'static str, matrix: &CsrMatrix) -> Result<()> {
+    if matrix.rows() > u32::MAX as usize || matrix.cols() > u32::MAX as usize {
+        return Err(ConvError::argument(
+            op,
+            "matrix",
+            format!(
+                "{}x{} is too large for u32 indices",
+                matrix.rows(),
+                matrix.cols()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A sparse operator A (and its stored Aᵀ) applied to caller-owned `[V, n]` slices.
 #[derive(Debug, Clone)]
 pub struct SparseKernel {
@@ -55,6 +72,16 @@ impl SparseKernel {
             a: op.csr().clone(),
             at: op.csr_t().clone(),
         }
+    }
+
+    /// The kernel of `matrix`, without a candle operator or device (the same A and Aᵀ as
+    /// [`SparseOp::new`] prepares).
+    pub fn from_matrix(matrix: &CsrMatrix) -> Result<Self> {
+        check_u32("SparseKernel::from_matrix", matrix)?;
+        Ok(Self {
+            a: Arc::new(Csr::from_matrix(matrix)),
+            at: Arc::new(Csr::from_matrix(&matrix.transpose())),
+        })
     }
 
     /// The same operator on renumbered vertices: output row p is row `rows[p]` of A, and input
@@ -116,27 +143,43 @@ pub struct ChebKernel {
 }
 
 impl ChebKernel {
-    /// The convolution of order `k` (1 ..= 8) on `laplacian`.
+    /// The convolution of order `k` (1 ..= 8) on `laplacian` (its matrices are shared, not
+    /// copied).
     pub fn new(laplacian: &SparseOp, k: usize) -> Result<Self> {
+        Self::checked(
+            laplacian.csr().clone(),
+            laplacian.csr_t().clone(),
+            k,
+            "ChebKernel::new",
+        )
+    }
+
+    /// The convolution of order `k` (1 ..= 8) on the rescaled Laplacian `laplacian`, without a
+    /// candle operator or device (the same matrices as `ChebKernel::new(&SparseOp::new(..))`).
+    pub fn from_matrix(laplacian: &CsrMatrix, k: usize) -> Result<Self> {
+        const OP: &str = "ChebKernel::from_matrix";
+        check_u32(OP, laplacian)?;
+        let a = Arc::new(Csr::from_matrix(laplacian));
+        let at = Arc::new(Csr::from_matrix(&laplacian.transpose()));
+        Self::checked(a, at, k, OP)
+    }
+
+    fn checked(a: Arc<Csr>, at: Arc<Csr>, k: usize, op: &'static str) -> Result<Self> {
         if k == 0 || k > MAX_K {
             return Err(ConvError::argument(
-                "ChebKernel::new",
+                op,
                 "k",
                 format!("{k}; the fused kernels take 1 ..= {MAX_K}"),
             ));
         }
-        if laplacian.rows() != laplacian.cols() {
+        if a.rows() != a.cols() {
             return Err(ConvError::argument(
-                "ChebKernel::new",
+                op,
                 "laplacian",
-                format!("{}x{} is not square", laplacian.rows(), laplacian.cols()),
+                format!("{}x{} is not square", a.rows(), a.cols()),
             ));
         }
-        Ok(Self {
-            a: laplacian.csr().clone(),
-            at: laplacian.csr_t().clone(),
-            k,
-        })
+        Ok(Self { a, at, k })
     }
 
     pub fn k(&self) -> usize {

@@ -395,3 +395,52 @@ fn graph_pool_timing_probe() {
         mean.apply(&x, &mut y, n).unwrap()
     });
 }
+
+/// Kernels made from the matrix alone (no candle operator, no device) compute what the
+/// kernels of a `SparseOp` compute, to the bit; bad arguments are refused by name.
+#[test]
+fn kernels_from_the_matrix_equal_those_of_the_candle_operator() {
+    let v = 40;
+    let m = random_matrix(v, v, 0.1, 31);
+    let op = SparseOp::new(&m, &Device::Cpu).unwrap();
+    let d = ConvDims {
+        batch: 3,
+        c_in: 4,
+        c_out: 5,
+    };
+    let x = random_vec(v * d.c_in * d.batch, 32);
+    let w = random_vec(d.c_in * 3 * d.c_out, 33);
+    let run = |kernel: &ChebKernel| {
+        let mut terms = vec![0.0; kernel.terms_len(d.batch, d.c_in)];
+        let mut y = vec![0.0; v * d.c_out * d.batch];
+        kernel.forward(&x, &w, d, &mut terms, &mut y).unwrap();
+        y
+    };
+    let from_op = run(&ChebKernel::new(&op, 3).unwrap());
+    let from_matrix = run(&ChebKernel::from_matrix(&m, 3).unwrap());
+    assert_eq!(from_op, from_matrix);
+
+    let rect = random_matrix(12, v, 0.2, 34);
+    let (a, b) = (
+        SparseKernel::new(&SparseOp::new(&rect, &Device::Cpu).unwrap()),
+        SparseKernel::from_matrix(&rect).unwrap(),
+    );
+    let xs = random_vec(v * 2, 35);
+    let (mut ya, mut yb) = (vec![0.0; 12 * 2], vec![1.0; 12 * 2]);
+    a.apply(&xs, &mut ya, 2).unwrap();
+    b.apply(&xs, &mut yb, 2).unwrap();
+    assert_eq!(ya, yb);
+    let xt = random_vec(12 * 2, 36);
+    let (mut ta, mut tb) = (vec![0.0; v * 2], vec![1.0; v * 2]);
+    a.apply_t(&xt, &mut ta, 2).unwrap();
+    b.apply_t(&xt, &mut tb, 2).unwrap();
+    assert_eq!(ta, tb);
+
+    let err = ChebKernel::from_matrix(&rect, 3).unwrap_err().to_string();
+    assert!(
+        err.contains("ChebKernel::from_matrix") && err.contains("not square"),
+        "{err}"
+    );
+    let err = ChebKernel::from_matrix(&m, 9).unwrap_err().to_string();
+    assert!(err.contains("k") && err.contains("1 ..= 8"), "{err}");
+}
