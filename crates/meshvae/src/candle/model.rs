@@ -12,7 +12,7 @@ mod build;
 mod cond;
 mod file;
 pub(crate) mod layers;
-mod vars;
+pub(crate) mod vars;
 
 pub(crate) use cond::{LABEL_SCALE, pick as pick_labels, unknown_label};
 pub(crate) use file::{entry as tensor_entry, stamped_error};

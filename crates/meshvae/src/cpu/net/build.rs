@@ -3,6 +3,7 @@
 use super::{Acts, Bn, Conv, ConvWeight, DenseVars, Latent, Net, Node, Pool, PoolOp, internal};
 use crate::candle::model::MeshVae;
 use crate::candle::model::layers::{ConvBlock, Down, Up};
+use crate::candle::model::vars;
 use crate::cpu::{Scalar, of};
 use crate::error::Result;
 use crate::net::config::{ConvKind, FEATURE_CHANNELS};
@@ -72,17 +73,16 @@ impl<T: Scalar> Net<T> {
          -> Result<Node> {
             let s = block.spec;
             let v = counts[s.level];
-            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions.
+            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions. The
+            // variables' names come from the model's own naming (`vars`), never spelled here.
+            let names = vars::conv_weight_names(side, config.conv, s.index);
             let (kernel_k, weight) = match config.conv {
-                ConvKind::Spectral => (
-                    config.k,
-                    ConvWeight::Stacked(index(&format!("{side}.conv{}.weight", s.index))?),
-                ),
+                ConvKind::Spectral => (config.k, ConvWeight::Stacked(index(&names[0])?)),
                 ConvKind::Spatial => (
                     2,
                     ConvWeight::Pair {
-                        w_self: index(&format!("{side}.conv{}.w_self", s.index))?,
-                        w_nb: index(&format!("{side}.conv{}.w_nb", s.index))?,
+                        w_self: index(&names[0])?,
+                        w_nb: index(&names[1])?,
                     },
                 ),
             };
@@ -93,12 +93,12 @@ impl<T: Scalar> Net<T> {
             let terms = acts.add(kernel.terms_len(max_batch, s.c_in));
             let pre = add(acts, v, s.c_out);
             let bn = if s.batch_norm {
-                let i = s.index;
+                let [gamma, beta, running_mean, running_var] = vars::bn_names(side, s.index);
                 Some(Bn {
-                    gamma: index(&format!("{side}.bn{i}.gamma"))?,
-                    beta: index(&format!("{side}.bn{i}.beta"))?,
-                    running_mean: state_var(&format!("{side}.bn{i}.running_mean"))?,
-                    running_var: state_var(&format!("{side}.bn{i}.running_var"))?,
+                    gamma: index(&gamma)?,
+                    beta: index(&beta)?,
+                    running_mean: state_var(&running_mean)?,
+                    running_var: state_var(&running_var)?,
                     mean: Vec::new(),
                     var: Vec::new(),
                     inv_std: Vec::new(),
