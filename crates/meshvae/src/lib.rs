@@ -11,7 +11,8 @@
 //! a learning-rate schedule, early stopping on the validation loss ([`Schedule`]; a run says
 //! why it stopped, [`StopReason`]), checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
 //! backward over reused buffers ([`Engine`], checked against candle's autograd) when it
-//! supports the model, and candle's autograd otherwise. A conditional model
+//! supports the model, and candle's autograd otherwise; which one ran, and why candle where it
+//! did, is said in the log, `run.json` and the summary ([`Executor`]). A conditional model
 //! (`ModelConfig::labels`) also takes each mesh's label (see `candle/model/cond.rs`); generation,
 //! interpolation and embedding work on the trained folder ([`TrainedModel`]).
 //!

@@ -25,7 +25,9 @@
 //! Speed notes: use mimalloc as the global allocator (every op allocates ~50 MB tensors), and
 //! number the template's vertices with [`locality_order`] once, before building the hierarchy,
 //! if its order has little locality (see `docs/benchmarks.md`). A network on the buffer-level
-//! kernels ([`ChebKernel`], [`SparseKernel`]) can instead renumber one level where it pays:
+//! kernels ([`ChebKernel`], [`SparseKernel`]; made from a `SparseOp` or, without candle or a
+//! device, from the matrix itself, [`ChebKernel::from_matrix`]) can instead renumber one level
+//! where it pays:
 //! [`ChebKernel::far_share`] measures the scatter, [`ChebKernel::locality_order`] gives an order,
 //! and [`ChebKernel::permuted`] and [`SparseKernel::permuted`] the renumbered operators
 //! (`docs/crates.md`, "Buffer-level kernels and vertex order"). Large intermediates are

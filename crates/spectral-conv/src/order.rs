@@ -103,7 +103,7 @@ fn bfs(
     last
 }
 
-/// P A Pᵀ for the order of [`locality_order`]: entry (p, q) is A[order[p], order[q]].
+/// P A Pᵀ for the order of [`locality_order`]: entry (p, q) is `A[order[p], order[q]]`.
 pub fn permute_symmetric(matrix: &CsrMatrix, order: &[u32]) -> Result<CsrMatrix> {
     let n = matrix.rows();
     let position = inverse_order(order, n)?;
