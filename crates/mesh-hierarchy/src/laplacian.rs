@@ -5,7 +5,7 @@ use crate::error::HierarchyError;
 use mesh_io::Face;
 use sparse_csr::CsrMatrix;
 
-/// The undirected, unweighted vertex adjacency of a triangle mesh (no self-loops): A[i][j] = 1
+/// The undirected, unweighted vertex adjacency of a triangle mesh (no self-loops): `A[i][j] = 1`
 /// when i and j share an edge. As the authors' code: the binarised cotangent-weight pattern.
 ///
 /// # Panics

@@ -13,7 +13,7 @@
 use mesh_io::{Face, Point};
 use sparse_csr::{CsrError, CsrMatrix};
 
-/// The m×n selection matrix: S[c, survivors[c]] = 1.
+/// The m×n selection matrix: `S[c, survivors[c]] = 1`.
 pub fn selection(survivors: &[u32], fine_count: usize) -> Result<CsrMatrix, CsrError> {
     let t: Vec<(u32, u32, f64)> = survivors
         .iter()
