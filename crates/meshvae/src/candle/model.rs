@@ -22,13 +22,12 @@ use crate::candle::dense::{GradSink, Orientation, dense};
 use crate::error::{Result, VaeError};
 use crate::net::config::{FEATURE_CHANNELS, ModelConfig};
 use crate::net::params::ParamCount;
-use crate::net::structure::Layer;
+use crate::net::plan::NetPlan;
 use crate::numerics::rng::Rng;
 use candle_core::backprop::GradStore;
 use candle_core::{DType, Device, Tensor, Var};
-use layers::{ConvBlock, Down, GraphConv, LevelOps, Up, Weights};
+use layers::{ConvBlock, GraphConv, Stage, Weights};
 use mesh_hierarchy::Hierarchy;
-use std::collections::BTreeMap;
 use std::sync::Arc;
 
 /// The encoder's output: the posterior q(z|x) = N(μ, diag σ²), both `[B, latent]`.
@@ -44,19 +43,18 @@ pub struct MeshVae {
     config: ModelConfig,
     dtype: DType,
     device: Device,
+    /// The layer list and variables every executor reads.
+    plan: Arc<NetPlan>,
     /// Vertex counts of the levels the network uses (0 ..= number of poolings).
     vertex_counts: Vec<usize>,
-    trainable: BTreeMap<String, Var>,
-    state: BTreeMap<String, Var>,
-    /// Encoder blocks in order.
-    pub(crate) enc: Vec<ConvBlock>,
-    /// Decoder blocks in the order they run.
-    pub(crate) dec: Vec<ConvBlock>,
-    /// Per level: its convolution operator (and transpose for tied decoder convolutions).
-    pub(crate) levels: Vec<LevelOps>,
-    /// `down[i]`: level i → i + 1; `up[i]`: level i + 1 → i.
-    pub(crate) down: Vec<Down>,
-    pub(crate) up: Vec<Up>,
+    /// The trained variables, by [`crate::net::vars::ParamId`].
+    params: Vec<Var>,
+    /// The batch norms' running statistics, by [`crate::net::vars::StateId`].
+    state: Vec<Var>,
+    /// The encoder's stages, one per step of the plan.
+    enc: Vec<Stage>,
+    /// The decoder's stages in the order they run.
+    dec: Vec<Stage>,
     w_mu: Tensor,
     b_mu: Tensor,
     w_sigma: Tensor,
@@ -96,53 +94,42 @@ impl MeshVae {
                 format!("{dtype:?}; the model runs in f32 or f64"),
             ));
         }
-        build::check_hierarchy(config, hierarchy)?;
-        let n_levels = config.pool_levels() + 1;
-        let vertex_counts: Vec<usize> = hierarchy.vertex_counts()[..n_levels].to_vec();
-        let coarse = vertex_counts[n_levels - 1];
-        let mut plan = vars::plan(config, coarse);
-        plan.extend(cond::plan(config, coarse * config.channels));
-        let (trainable, state) =
-            vars::create(&plan, config.init_std, dtype, device, &mut Rng::new(seed))?;
-
-        let levels = build::level_ops(config, hierarchy, n_levels, device)?;
-        let (enc, dec) = build::conv_blocks(config, &levels, &trainable, &state)?;
-        let (down, up) = build::pooling(hierarchy, n_levels, device)?;
-
-        let t = |name: &str| -> Result<Tensor> {
-            Ok(build::var(&trainable, name)?.as_tensor().clone())
-        };
-        let label_weights = if config.is_conditional() {
-            let [mu, sigma, dec] = cond::NAMES;
-            Some(cond::LabelWeights {
-                mu: t(mu)?,
-                sigma: t(sigma)?,
-                dec: t(dec)?,
-            })
-        } else {
-            None
-        };
+        let plan = NetPlan::new(config, hierarchy)?;
+        let mut rng = Rng::new(seed);
+        let params = vars::create(&plan.params, config.init_std, dtype, device, &mut rng)?;
+        let state = vars::create(&plan.state, config.init_std, dtype, device, &mut rng)?;
+        let (enc, dec) = build::stages(config, &plan, &params, &state, device)?;
+        let t = |id: crate::net::vars::ParamId| params[id.0].as_tensor().clone();
+        let heads = plan.heads;
+        let label_weights = heads.labels.map(|l| cond::LabelWeights {
+            mu: t(l.mu),
+            sigma: t(l.sigma),
+            dec: t(l.dec),
+        });
         Ok(Self {
             label_weights,
-            w_mu: t("enc.mu.weight")?,
-            b_mu: t("enc.mu.bias")?,
-            w_sigma: t("enc.sigma.weight")?,
-            b_sigma: t("enc.sigma.bias")?,
-            b_dec: t("dec.fc.bias")?,
+            w_mu: t(heads.w_mu),
+            b_mu: t(heads.b_mu),
+            w_sigma: t(heads.w_sigma),
+            b_sigma: t(heads.b_sigma),
+            b_dec: t(heads.b_dec),
             sink_mu: Arc::default(),
             sink_sigma: Arc::default(),
             config: config.clone(),
             dtype,
             device: device.clone(),
-            vertex_counts,
-            trainable,
+            vertex_counts: plan.vertex_counts(),
+            plan: Arc::new(plan),
+            params,
             state,
             enc,
             dec,
-            levels,
-            down,
-            up,
         })
+    }
+
+    /// The layer list and variables the model was built from (what the CPU engine reads).
+    pub(crate) fn plan(&self) -> &NetPlan {
+        &self.plan
     }
 
     pub fn config(&self) -> &ModelConfig {
@@ -173,27 +160,38 @@ impl MeshVae {
 
     /// The trained variables, sorted by name (the order the optimiser and the L2 term use).
     pub fn trainable_vars(&self) -> Vec<(String, Var)> {
-        self.trainable
-            .iter()
-            .map(|(n, v)| (n.clone(), v.clone()))
+        (self.plan.params.iter().zip(&self.params))
+            .map(|(p, v)| (p.name.clone(), v.clone()))
             .collect()
     }
 
     /// The batch norms' running means and variances, sorted by name.
     pub fn state_vars(&self) -> Vec<(String, Var)> {
-        self.state
-            .iter()
-            .map(|(n, v)| (n.clone(), v.clone()))
+        (self.plan.state.iter().zip(&self.state))
+            .map(|(p, v)| (p.name.clone(), v.clone()))
             .collect()
+    }
+
+    /// Every variable, trained then state, with its name.
+    pub(crate) fn named_vars(&self) -> impl Iterator<Item = (&String, &Var)> {
+        let trained = self.plan.params.iter().zip(&self.params);
+        let state = self.plan.state.iter().zip(&self.state);
+        trained.chain(state).map(|(p, v)| (&p.name, v))
+    }
+
+    /// The trained variables by name (tests).
+    #[cfg(test)]
+    pub(crate) fn trainable(&self) -> std::collections::BTreeMap<String, Var> {
+        self.trainable_vars().into_iter().collect()
     }
 
     /// Weights and biases (BN γ, β count as biases) actually created.
     pub fn param_count(&self) -> ParamCount {
         let (mut with_biases, mut without_biases) = (0, 0);
-        for (name, v) in &self.trainable {
-            let n = v.elem_count();
+        for p in &self.plan.params {
+            let n = p.len();
             with_biases += n;
-            if !vars::is_bias(name) {
+            if !p.bias {
                 without_biases += n;
             }
         }
@@ -234,18 +232,8 @@ impl MeshVae {
         let batch = x.dim(0)?;
         // Vertex-major inside the network: see `spectral_conv`'s layouts.
         let mut h = x.transpose(0, 1)?.contiguous()?;
-        let (mut level, mut blocks) = (0, self.enc.iter());
-        for layer in self.config.structure.layers() {
-            match layer {
-                Layer::Conv => {
-                    let block = blocks.next().ok_or_else(|| self.plan_error())?;
-                    h = block.forward(&h, mode, None)?;
-                }
-                Layer::Pool => {
-                    h = self.down[level].forward(&h)?;
-                    level += 1;
-                }
-            }
+        for stage in &self.enc {
+            h = self.run(stage, &h, mode)?;
         }
         let flat = h
             .transpose(0, 1)?
@@ -278,19 +266,8 @@ impl MeshVae {
             .reshape((batch, coarse, self.config.channels))?
             .transpose(0, 1)?
             .contiguous()?;
-        let (mut level, mut blocks) = (self.vertex_counts.len() - 1, self.dec.iter());
-        for layer in self.config.structure.layers().iter().rev() {
-            match layer {
-                Layer::Conv => {
-                    let block = blocks.next().ok_or_else(|| self.plan_error())?;
-                    let tied = self.tied_conv(block)?;
-                    h = block.forward(&h, mode, tied.as_ref())?;
-                }
-                Layer::Pool => {
-                    level -= 1;
-                    h = self.up[level].forward(&h)?;
-                }
-            }
+        for stage in &self.dec {
+            h = self.run(stage, &h, mode)?;
         }
         Ok(h.transpose(0, 1)?.contiguous()?)
     }
@@ -402,28 +379,55 @@ impl MeshVae {
         Ok(grads)
     }
 
+    /// One stage on h `[V, B, C]`.
+    fn run(&self, stage: &Stage, h: &Tensor, mode: Mode) -> Result<Tensor> {
+        match stage {
+            Stage::Conv(block) => {
+                let tied = self.tied_conv(block)?;
+                block.forward(h, mode, tied.as_ref())
+            }
+            Stage::Down(d) => d.forward(h),
+            Stage::Up(u) => u.forward(h),
+        }
+    }
+
+    /// The encoder's convolution blocks, in order (index = `spec.index`).
+    pub(crate) fn encoder_blocks(&self) -> impl Iterator<Item = &ConvBlock> {
+        self.enc.iter().filter_map(|s| match s {
+            Stage::Conv(b) => Some(b),
+            _ => None,
+        })
+    }
+
+    /// The decoder's convolution blocks, in the order they run.
+    #[cfg(test)]
+    pub(crate) fn decoder_blocks(&self) -> impl Iterator<Item = &ConvBlock> {
+        self.dec.iter().filter_map(|s| match s {
+            Stage::Conv(b) => Some(b),
+            _ => None,
+        })
+    }
+
     /// The adjoint of the mirror encoder convolution, for a tied decoder block.
     fn tied_conv(&self, block: &ConvBlock) -> Result<Option<GraphConv>> {
-        if !matches!(block.weights, Weights::Tied) {
+        let Weights::Tied(op_t) = &block.weights else {
             return Ok(None);
-        }
-        let enc = &self.enc[block.spec.index];
-        let (Weights::Own(conv), Some(op_t)) = (&enc.weights, &self.levels[block.spec.level].op_t)
-        else {
-            return Err(self.plan_error());
+        };
+        let mirror = self.encoder_blocks().nth(block.spec.index);
+        let Some(Weights::Own(conv)) = mirror.map(|b| &b.weights) else {
+            return Err(VaeError::shape(
+                "MeshVae",
+                format!(
+                    "internal: tied convolution {} has no encoder convolution",
+                    block.spec.index
+                ),
+            ));
         };
         Ok(Some(conv.adjoint(op_t)?))
     }
 
     fn flat_width(&self) -> usize {
-        self.vertex_counts[self.vertex_counts.len() - 1] * self.config.channels
-    }
-
-    fn plan_error(&self) -> VaeError {
-        VaeError::shape(
-            "MeshVae",
-            format!("internal: layers do not match {}", self.config.structure),
-        )
+        self.plan.flat_width()
     }
 
     fn check_input(&self, op: &'static str, x: &Tensor) -> Result<()> {

@@ -20,7 +20,8 @@
 //! (`tests.rs` compares the two).
 //!
 //! This folder holds the engine (here), its network of layers over reused buffers (`net.rs`;
-//! `net/`: built from a [`MeshVae`], per-layer forward and backward, convolution weights,
+//! `net/`: built from the model's network plan (`net::plan::NetPlan`: the layer list and
+//! variable ids candle's model is built from too), per-layer forward and backward, convolution weights,
 //! inference), its element-wise kernels (`kernels.rs`), the matrix products (`gemm.rs`) and
 //! [`wide`](wide::wide) (AVX2 + FMA loops, also used by Adam's update). It imports `train/` only
 //! for the [`Adam`] it steps and the [`LossWeights`] it reads.

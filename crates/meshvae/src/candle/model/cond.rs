@@ -25,20 +25,11 @@
 //! Variables: `enc.mu.label_weight`, `enc.sigma.label_weight` `[L, latent]`,
 //! `dec.fc.label_weight` `[L, V_L·C]` (weights, not biases, in the parameter count).
 
-use super::vars::{Init, VarPlan};
 use crate::error::{Result, VaeError};
-use crate::net::config::ModelConfig;
 use candle_core::{DType, Device, Tensor};
 
 /// The value of a one-hot label's active entry (see the module documentation).
 pub const LABEL_SCALE: f32 = 8.0;
-
-/// Names of the label weights into μ, σ and the decoder's dense layer.
-pub(crate) const NAMES: [&str; 3] = [
-    "enc.mu.label_weight",
-    "enc.sigma.label_weight",
-    "dec.fc.label_weight",
-];
 
 /// The label weights of a conditional model.
 #[derive(Debug, Clone)]
@@ -49,25 +40,6 @@ pub(crate) struct LabelWeights {
     pub sigma: Tensor,
     /// `[L, V_L·C]`: c's contribution to the decoder's dense layer.
     pub dec: Tensor,
-}
-
-/// The variables of the label weights (none for an unconditional model); `flat` = V_L·C.
-pub(crate) fn plan(config: &ModelConfig, flat: usize) -> Vec<VarPlan> {
-    let l = config.labels.len();
-    if l == 0 {
-        return Vec::new();
-    }
-    let widths = [config.latent, config.latent, flat];
-    NAMES
-        .iter()
-        .zip(widths)
-        .map(|(name, width)| VarPlan {
-            name: (*name).to_owned(),
-            shape: vec![l, width],
-            init: Init::Zeros,
-            trainable: true,
-        })
-        .collect()
 }
 
 /// One-hot rows `[B, L]` (active entry [`LABEL_SCALE`]) for `labels`, each one of `classes`.
@@ -178,8 +150,8 @@ mod tests {
     }
 
     fn set_random_label_weights(model: &MeshVae) {
-        for (k, name) in super::NAMES.iter().enumerate() {
-            let v = &model.trainable[*name];
+        for (k, name) in crate::net::vars::LABEL_NAMES.iter().enumerate() {
+            let v = model.trainable()[*name].clone();
             v.set(&random(v.dims(), 40 + k as u64)).unwrap();
         }
     }
@@ -188,8 +160,8 @@ mod tests {
     fn label_weights_start_at_zero_and_leave_every_other_weight_as_unconditional() {
         let (cond, plain) = pair();
         let flat = cond.flat_width();
-        for (name, v) in &cond.trainable {
-            match plain.trainable.get(name) {
+        for (name, v) in &cond.trainable() {
+            match plain.trainable().get(name) {
                 Some(p) => assert_eq!(
                     v.as_tensor()
                         .flatten_all()
@@ -204,7 +176,10 @@ mod tests {
                     "{name}"
                 ),
                 None => {
-                    assert!(super::NAMES.contains(&name.as_str()), "{name}");
+                    assert!(
+                        crate::net::vars::LABEL_NAMES.contains(&name.as_str()),
+                        "{name}"
+                    );
                     let sum: f64 = v
                         .as_tensor()
                         .abs()
@@ -217,9 +192,9 @@ mod tests {
                 }
             }
         }
-        assert_eq!(cond.trainable.len(), plain.trainable.len() + 3);
-        assert_eq!(cond.trainable["dec.fc.label_weight"].dims(), [3, flat]);
-        assert_eq!(cond.trainable["enc.sigma.label_weight"].dims(), [3, 5]);
+        assert_eq!(cond.trainable().len(), plain.trainable().len() + 3);
+        assert_eq!(cond.trainable()["dec.fc.label_weight"].dims(), [3, flat]);
+        assert_eq!(cond.trainable()["enc.sigma.label_weight"].dims(), [3, 5]);
         // Its parameter count is the formula's.
         let counts = &cond.vertex_counts;
         assert_eq!(
@@ -244,7 +219,7 @@ mod tests {
         let c = Tensor::cat(&[&c.narrow(0, 0, 2).unwrap(), &blend], 0).unwrap();
         let got = cond.encode_cond(&x, Some(&c), Mode::Eval).unwrap();
         let base = plain.encode(&x, Mode::Eval).unwrap();
-        let w = |name: &str| rows(cond.trainable[name].as_tensor());
+        let w = |name: &str| rows(cond.trainable()[name].as_tensor());
         let (w_mu, w_sigma, w_dec) = (
             w("enc.mu.label_weight"),
             w("enc.sigma.label_weight"),
@@ -303,8 +278,8 @@ mod tests {
         };
         let total = cond.loss_cond(&x, Some(&c), &eps, &weights).unwrap().total;
         let grads = cond.backward(&total).unwrap();
-        for name in super::NAMES {
-            let var = &cond.trainable[name];
+        for name in crate::net::vars::LABEL_NAMES {
+            let var = cond.trainable()[name].clone();
             let grad = grads.get(var.as_tensor()).unwrap();
             let grad: Vec<f64> = grad.flatten_all().unwrap().to_vec1().unwrap();
             let values: Vec<f64> = var.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
@@ -388,8 +363,8 @@ mod tests {
         back.load(&path).unwrap();
         let name = "dec.fc.label_weight";
         assert_eq!(
-            rows(back.trainable[name].as_tensor()),
-            rows(cond.trainable[name].as_tensor())
+            rows(back.trainable()[name].as_tensor()),
+            rows(cond.trainable()[name].as_tensor())
         );
         let err = plain.load(&path).unwrap_err().to_string();
         assert!(err.contains("labels"), "{err}");

@@ -39,9 +39,7 @@ impl MeshVae {
     /// Copies of every variable (trainable and state), by name. Copies: later training steps
     /// do not change them.
     pub fn tensors(&self) -> Result<BTreeMap<String, Tensor>> {
-        self.trainable
-            .iter()
-            .chain(&self.state)
+        self.named_vars()
             .map(|(n, v)| Ok((n.clone(), v.as_tensor().copy()?)))
             .collect()
     }
@@ -50,7 +48,7 @@ impl MeshVae {
     /// are checked before anything is changed; a missing, extra or misshapen tensor is a
     /// [`VaeError::Model`] naming `origin` and the tensor.
     pub fn set_tensors(&mut self, tensors: &HashMap<String, Tensor>, origin: &Path) -> Result<()> {
-        let ours: BTreeMap<&String, _> = self.trainable.iter().chain(&self.state).collect();
+        let ours: BTreeMap<&String, _> = self.named_vars().collect();
         let mut problems = Vec::new();
         for (name, v) in &ours {
             match tensors.get(*name) {

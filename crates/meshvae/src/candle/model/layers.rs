@@ -1,6 +1,6 @@
 //! The building blocks of [`super::MeshVae`]: graph convolutions (own weights or the adjoint of
-//! an encoder convolution), convolution blocks (conv → batch norm → tanh) and the pooling and
-//! de-pooling between levels.
+//! an encoder convolution), convolution blocks (conv → batch norm → tanh), the pooling and
+//! de-pooling between levels, and [`Stage`]: one of those per step of the plan.
 
 use crate::candle::batch_norm::BatchNorm;
 use crate::candle::batch_norm::Mode;
@@ -8,14 +8,6 @@ use crate::error::{Result, VaeError};
 use crate::net::config::ConvSpec;
 use candle_core::Tensor;
 use spectral_conv::{ChebConv, DePool, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv};
-
-/// The sparse operators of one level: the convolution's operator A (L̃ for spectral, D⁻¹A for
-/// spatial convolutions) and, when decoder convolutions are tied, Aᵀ for their adjoints.
-#[derive(Debug, Clone)]
-pub(crate) struct LevelOps {
-    pub op: SparseOp,
-    pub op_t: Option<SparseOp>,
-}
 
 /// A graph convolution with weights (no bias: batch norm's β is the layers' only offset).
 #[derive(Debug, Clone)]
@@ -73,8 +65,9 @@ impl GraphConv {
 #[derive(Debug, Clone)]
 pub(crate) enum Weights {
     Own(GraphConv),
-    /// The adjoint of encoder convolution `spec.index` (tied decoder convolutions).
-    Tied,
+    /// The adjoint of encoder convolution `spec.index` (tied decoder convolutions), on the
+    /// level's transposed operator Aᵀ.
+    Tied(SparseOp),
 }
 
 /// conv → optional batch norm → optional tanh.
@@ -108,8 +101,8 @@ impl ConvBlock {
     fn conv<'a>(&'a self, tied: Option<&'a GraphConv>) -> Result<&'a GraphConv> {
         match (&self.weights, tied) {
             (Weights::Own(conv), _) => Ok(conv),
-            (Weights::Tied, Some(conv)) => Ok(conv),
-            (Weights::Tied, None) => Err(VaeError::shape(
+            (Weights::Tied(_), Some(conv)) => Ok(conv),
+            (Weights::Tied(_), None) => Err(VaeError::shape(
                 "ConvBlock::forward",
                 format!(
                     "tied convolution {} without its encoder weights",
@@ -118,6 +111,14 @@ impl ConvBlock {
             )),
         }
     }
+}
+
+/// One step of the encoder or decoder, as the plan lists them.
+#[derive(Debug, Clone)]
+pub(crate) enum Stage {
+    Conv(ConvBlock),
+    Down(Down),
+    Up(Up),
 }
 
 /// Pooling from level i to level i + 1.

@@ -35,9 +35,9 @@ fn tied_decoder_convolutions_are_the_adjoints_of_the_encoders() {
         let h = hierarchy(&config);
         let model = MeshVae::with_dtype(&config, &h, &Device::Cpu, DType::F64, 1).unwrap();
         // No decoder convolution weights exist: only batch norm and the dense bias.
-        assert!(model.trainable.keys().all(|n| !n.starts_with("dec.conv")));
-        for (i, enc) in model.enc.iter().enumerate() {
-            let dec = model.dec.iter().find(|d| d.spec.index == i).unwrap();
+        assert!(model.trainable().keys().all(|n| !n.starts_with("dec.conv")));
+        for (i, enc) in model.encoder_blocks().enumerate() {
+            let dec = model.decoder_blocks().find(|d| d.spec.index == i).unwrap();
             let v = model.vertex_counts[enc.spec.level];
             let x = random(&[2, v, enc.spec.c_in], 10 + i as u64);
             let y = random(&[2, v, enc.spec.c_out], 20 + i as u64);
@@ -60,7 +60,7 @@ fn tied_decoder_convolutions_are_the_adjoints_of_the_encoders() {
         } else {
             "enc.conv0.w_nb"
         };
-        assert!(grads.get(model.trainable[name].as_tensor()).is_some());
+        assert!(grads.get(model.trainable()[name].as_tensor()).is_some());
     }
 }
 
@@ -73,16 +73,16 @@ fn the_decoder_dense_layer_is_the_transposed_mu_head() {
     };
     let h = hierarchy(&config);
     let model = MeshVae::with_dtype(&config, &h, &Device::Cpu, DType::F64, 2).unwrap();
-    model.trainable["dec.fc.bias"]
+    model.trainable()["dec.fc.bias"]
         .set(&random(&[model.flat_width()], 5))
         .unwrap();
     let z = random(&[3, 6], 4);
     let got: Vec<Vec<f64>> = model.decoder_fc(&z).unwrap().to_vec2().unwrap();
-    let w: Vec<Vec<f64>> = model.trainable["enc.mu.weight"]
+    let w: Vec<Vec<f64>> = model.trainable()["enc.mu.weight"]
         .as_tensor()
         .to_vec2()
         .unwrap();
-    let b: Vec<f64> = model.trainable["dec.fc.bias"]
+    let b: Vec<f64> = model.trainable()["dec.fc.bias"]
         .as_tensor()
         .to_vec1()
         .unwrap();
@@ -93,7 +93,7 @@ fn the_decoder_dense_layer_is_the_transposed_mu_head() {
             assert!((value - want).abs() < 1e-12);
         }
     }
-    assert!(!model.trainable.contains_key("dec.fc.weight"));
+    assert!(!model.trainable().contains_key("dec.fc.weight"));
 }
 
 #[test]

@@ -1,15 +1,14 @@
-//! Building the engine's network from a model: its layer list and buffers.
+//! Building the engine's network from a model's plan: its layer list and buffers.
 
 use super::{Acts, Bn, Conv, ConvWeight, DenseVars, Latent, Net, Node, Pool, PoolOp, internal};
 use crate::candle::model::MeshVae;
-use crate::candle::model::layers::{ConvBlock, Down, Up};
-use crate::candle::model::vars;
 use crate::cpu::{Scalar, of};
 use crate::error::Result;
-use crate::net::config::{ConvKind, FEATURE_CHANNELS};
-use crate::net::structure::Layer;
-use candle_core::Var;
-use spectral_conv::{ChebKernel, SparseKernel};
+use crate::net::config::FEATURE_CHANNELS;
+use crate::net::plan::{ConvStep, ConvVars, PoolStep, Step};
+use candle_core::{Device, Var};
+use mesh_hierarchy::PoolMode;
+use spectral_conv::{ChebKernel, MaxMode, MaxPool, SparseKernel};
 
 /// When level 0 is renumbered: more than this share of its neighbours lie more than
 /// [`FAR_WINDOW`] positions apart. 1,024 vertex blocks (1.2 MB at B = 32, C = 9) is beyond the
@@ -21,23 +20,11 @@ const FAR_WINDOW: usize = if cfg!(test) { 16 } else { 1024 };
 impl<T: Scalar> Net<T> {
     /// The network of `model` with buffers for batches of up to `max_batch`.
     pub fn build(model: &MeshVae, max_batch: usize) -> Result<Self> {
+        let plan = model.plan();
         let (names, vars): (Vec<String>, Vec<Var>) = model.trainable_vars().into_iter().unzip();
-        let index = |name: &str| -> Result<usize> {
-            names
-                .iter()
-                .position(|n| n == name)
-                .ok_or_else(|| internal(format!("no variable {name}")))
-        };
-        let state = model.state_vars();
-        let state_var = |name: &str| -> Result<Var> {
-            state
-                .iter()
-                .find(|(n, _)| n == name)
-                .map(|(_, v)| v.clone())
-                .ok_or_else(|| internal(format!("no state variable {name}")))
-        };
+        let state: Vec<Var> = model.state_vars().into_iter().map(|(_, v)| v).collect();
         let mut grads: Vec<Vec<T>> = vars.iter().map(|v| vec![of(0.0); v.elem_count()]).collect();
-        let counts = model.vertex_counts().to_vec();
+        let counts = plan.vertex_counts();
         let config = model.config();
         let mut acts = Acts(Vec::new());
         let mut max_act = 0;
@@ -55,9 +42,9 @@ impl<T: Scalar> Net<T> {
         // a sparse pooling operator (max pooling keeps the order; without pooling the dense
         // layer reads level 0). On horse-gallop, whose order is local, renumbering was 3 %
         // slower.
-        let order = match (model.down.first(), model.up.first()) {
-            (Some(Down::Mean(_) | Down::Sampling(_)), Some(Up::DePool(_) | Up::Sampling(_))) => {
-                let level0 = ChebKernel::new(&model.levels[0].op, 1)?;
+        let order = match plan.first_pool().map(|p| p.mode) {
+            Some(PoolMode::Mean | PoolMode::Sampling) => {
+                let level0 = ChebKernel::from_matrix(plan.operator(0), 1)?;
                 (level0.far_share(FAR_WINDOW) > FAR_SHARE).then(|| level0.locality_order())
             }
             _ => None,
@@ -66,46 +53,41 @@ impl<T: Scalar> Net<T> {
 
         let conv = |acts: &mut Acts<T>,
                     add: &mut dyn FnMut(&mut Acts<T>, usize, usize) -> usize,
-                    side: &str,
-                    block: &ConvBlock,
+                    step: &ConvStep,
                     input: usize,
                     need_dx: bool|
          -> Result<Node> {
-            let s = block.spec;
+            let s = step.spec;
             let v = counts[s.level];
-            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions. The
-            // variables' names come from the model's own naming (`vars`), never spelled here.
-            let names = vars::conv_weight_names(side, config.conv, s.index);
-            let (kernel_k, weight) = match config.conv {
-                ConvKind::Spectral => (config.k, ConvWeight::Stacked(index(&names[0])?)),
-                ConvKind::Spatial => (
+            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions.
+            let (kernel_k, weight) = match step.weights {
+                ConvVars::Cheb(w) => (config.k, ConvWeight::Stacked(w.0)),
+                ConvVars::Spatial { w_self, w_nb } => (
                     2,
                     ConvWeight::Pair {
-                        w_self: index(&names[0])?,
-                        w_nb: index(&names[1])?,
+                        w_self: w_self.0,
+                        w_nb: w_nb.0,
                     },
                 ),
+                ConvVars::Tied => {
+                    return Err(internal("the engine does not run tied convolutions"));
+                }
             };
-            let mut kernel = ChebKernel::new(&model.levels[s.level].op, kernel_k)?;
+            let mut kernel = ChebKernel::from_matrix(plan.operator(s.level), kernel_k)?;
             if let Some(order) = at_level(s.level) {
                 kernel = kernel.permuted(order)?;
             }
             let terms = acts.add(kernel.terms_len(max_batch, s.c_in));
             let pre = add(acts, v, s.c_out);
-            let bn = if s.batch_norm {
-                let [gamma, beta, running_mean, running_var] = vars::bn_names(side, s.index);
-                Some(Bn {
-                    gamma: index(&gamma)?,
-                    beta: index(&beta)?,
-                    running_mean: state_var(&running_mean)?,
-                    running_var: state_var(&running_var)?,
-                    mean: Vec::new(),
-                    var: Vec::new(),
-                    inv_std: Vec::new(),
-                })
-            } else {
-                None
-            };
+            let bn = step.bn.map(|b| Bn {
+                gamma: b.gamma.0,
+                beta: b.beta.0,
+                running_mean: state[b.running_mean.0].clone(),
+                running_var: state[b.running_var.0].clone(),
+                mean: Vec::new(),
+                var: Vec::new(),
+                inv_std: Vec::new(),
+            });
             let out = if bn.is_some() {
                 add(acts, v, s.c_out)
             } else {
@@ -126,94 +108,76 @@ impl<T: Scalar> Net<T> {
                 need_dx,
             }))
         };
+        // A pooling step's operator: the sparse product, or the max over each row's columns
+        // (recording the selection for the backward pass). At level 0 the sparse operators are
+        // renumbered like the convolutions there.
+        let pool = |acts: &mut Acts<T>,
+                    add: &mut dyn FnMut(&mut Acts<T>, usize, usize) -> usize,
+                    step: &PoolStep,
+                    c: usize,
+                    input: usize|
+         -> Result<Node> {
+            let (v_in, v_out) = (counts[step.from], counts[step.to]);
+            let (rows, cols) = (at_level(step.to), at_level(step.from));
+            let sparse = || -> Result<PoolOp> {
+                Ok(PoolOp::Sparse(
+                    SparseKernel::from_matrix(&step.matrix)?.permuted(rows, cols)?,
+                ))
+            };
+            let max = |mode: MaxMode| -> Result<PoolOp> {
+                let pool = MaxPool::with_mode(&step.matrix, mode, &Device::Cpu)?;
+                Ok(PoolOp::Max(pool, vec![0; v_out * c * max_batch]))
+            };
+            let op = match (step.mode, step.is_depool()) {
+                (PoolMode::Identity, _) => PoolOp::Identity,
+                (_, true) | (PoolMode::Mean | PoolMode::Sampling, false) => sparse()?,
+                (PoolMode::SignedMax, false) => max(MaxMode::SignedMagnitude)?,
+                (PoolMode::Max, false) => max(MaxMode::Plain)?,
+            };
+            let out = match op {
+                PoolOp::Identity => input,
+                _ => add(acts, v_out, c),
+            };
+            Ok(Node::Pool(Pool {
+                op,
+                v_in,
+                v_out,
+                c,
+                input,
+                out,
+            }))
+        };
 
-        let layers = config.structure.layers();
         let (mut enc, mut dec) = (Vec::new(), Vec::new());
-        let (mut level, mut cur, mut channels) = (0, x_buf, FEATURE_CHANNELS);
-        let mut blocks = model.enc.iter();
-        for layer in layers.iter() {
-            match layer {
-                Layer::Conv => {
-                    let block = blocks.next().ok_or_else(|| internal("encoder plan"))?;
-                    let node = conv(&mut acts, &mut add, "enc", block, cur, !enc.is_empty())?;
-                    channels = block.spec.c_out;
-                    cur = node.out();
-                    enc.push(node);
+        let (mut cur, mut channels) = (x_buf, FEATURE_CHANNELS);
+        for step in &plan.encoder {
+            let node = match step {
+                Step::Conv(c) => {
+                    channels = c.spec.c_out;
+                    conv(&mut acts, &mut add, c, cur, !enc.is_empty())?
                 }
-                Layer::Pool => {
-                    let (v_in, v_out) = (counts[level], counts[level + 1]);
-                    let fine = at_level(level);
-                    let (op, out) = match &model.down[level] {
-                        Down::Identity => (PoolOp::Identity, cur),
-                        Down::Mean(p) => (
-                            PoolOp::Sparse(SparseKernel::new(p.op()).permuted(None, fine)?),
-                            add(&mut acts, v_out, channels),
-                        ),
-                        Down::Sampling(p) => (
-                            PoolOp::Sparse(SparseKernel::new(p.op()).permuted(None, fine)?),
-                            add(&mut acts, v_out, channels),
-                        ),
-                        Down::Max(p) => (
-                            PoolOp::Max(p.clone(), vec![0; v_out * channels * max_batch]),
-                            add(&mut acts, v_out, channels),
-                        ),
-                    };
-                    enc.push(Node::Pool(Pool {
-                        op,
-                        v_in,
-                        v_out,
-                        c: channels,
-                        input: cur,
-                        out,
-                    }));
-                    cur = out;
-                    level += 1;
-                }
-            }
+                Step::Pool(p) => pool(&mut acts, &mut add, p, channels, cur)?,
+            };
+            cur = node.out();
+            enc.push(node);
         }
         let enc_out = cur;
-        let coarse = counts[level];
+        let coarse = counts[counts.len() - 1];
         let flat = coarse * channels;
         let dec_in = add(&mut acts, coarse, channels);
         cur = dec_in;
-        let mut blocks = model.dec.iter();
-        for layer in layers.iter().rev() {
-            match layer {
-                Layer::Conv => {
-                    let block = blocks.next().ok_or_else(|| internal("decoder plan"))?;
-                    let node = conv(&mut acts, &mut add, "dec", block, cur, true)?;
-                    channels = block.spec.c_out;
-                    cur = node.out();
-                    dec.push(node);
+        for step in &plan.decoder {
+            let node = match step {
+                Step::Conv(c) => {
+                    channels = c.spec.c_out;
+                    conv(&mut acts, &mut add, c, cur, true)?
                 }
-                Layer::Pool => {
-                    level -= 1;
-                    let (v_in, v_out) = (counts[level + 1], counts[level]);
-                    let fine = at_level(level);
-                    let (op, out) = match &model.up[level] {
-                        Up::Identity => (PoolOp::Identity, cur),
-                        Up::DePool(p) => (
-                            PoolOp::Sparse(SparseKernel::new(p.op()).permuted(fine, None)?),
-                            add(&mut acts, v_out, channels),
-                        ),
-                        Up::Sampling(p) => (
-                            PoolOp::Sparse(SparseKernel::new(p.op()).permuted(fine, None)?),
-                            add(&mut acts, v_out, channels),
-                        ),
-                    };
-                    dec.push(Node::Pool(Pool {
-                        op,
-                        v_in,
-                        v_out,
-                        c: channels,
-                        input: cur,
-                        out,
-                    }));
-                    cur = out;
-                }
-            }
+                Step::Pool(p) => pool(&mut acts, &mut add, p, channels, cur)?,
+            };
+            cur = node.out();
+            dec.push(node);
         }
-        if channels != FEATURE_CHANNELS || level != 0 {
+        if channels != FEATURE_CHANNELS {
             return Err(internal(
                 "the decoder does not end on the template's features",
             ));
@@ -221,12 +185,13 @@ impl<T: Scalar> Net<T> {
         let x_hat = cur;
         let l = config.latent;
         let lat_buf = || vec![of(0.0); max_batch * l];
+        let heads = plan.heads;
         let dense = DenseVars {
-            w_mu: index("enc.mu.weight")?,
-            b_mu: index("enc.mu.bias")?,
-            w_sigma: index("enc.sigma.weight")?,
-            b_sigma: index("enc.sigma.bias")?,
-            b_dec: index("dec.fc.bias")?,
+            w_mu: heads.w_mu.0,
+            b_mu: heads.b_mu.0,
+            w_sigma: heads.w_sigma.0,
+            b_sigma: heads.b_sigma.0,
+            b_dec: heads.b_dec.0,
         };
         // The dense weights' gradients are made block by block inside Adam's pass
         // (`Net::dense_grad_rows`), never whole.
