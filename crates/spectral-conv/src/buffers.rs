@@ -12,7 +12,7 @@ use crate::cheb_kernel::{self, Bufs, ChebShape, MAX_K, Need};
 use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real, spmm_axpby};
 use crate::layout::{Blocks, Io};
-use crate::max_kernel::{max_pool, max_unpool};
+use crate::max_kernel::{MaxMode, max_pool, max_unpool};
 use crate::pool::MaxPool;
 use crate::spmm::SparseOp;
 use sparse_csr::CsrMatrix;
@@ -349,11 +349,54 @@ fn split_terms<T>(terms: &mut [T], k: usize, size: usize) -> Vec<&mut [T]> {
     terms.chunks_mut(size).take(count).collect()
 }
 
-impl MaxPool {
-    /// Max pooling (the layer's [`MaxPool::mode`]) of x `[fine, n]` into y `[coarse, n]`
-    /// (every one of a vertex's n values pooled on its own, as
-    /// [`MaxPool::forward_vertex_major`]); `arg` (`[coarse, n]`) receives the selected fine
-    /// vertex (`u32::MAX` for an empty cluster).
+/// Max pooling over the rows of a pooling matrix's pattern (each row's columns are one
+/// cluster or neighbourhood), on caller-owned `[V, n]` slices; what [`MaxPool`] runs on the CPU.
+#[derive(Debug, Clone)]
+pub struct MaxKernel {
+    pattern: Arc<Csr>,
+    /// The transposed pattern (fine vertex → the rows holding it), for the backward pass.
+    pattern_t: Arc<Csr>,
+    mode: MaxMode,
+}
+
+impl MaxKernel {
+    /// The kernel selecting as `mode` says over the rows of `pooling` (coarse × fine).
+    ///
+    /// Errors: a matrix without fine vertices or too large for u32 indices.
+    pub fn from_matrix(pooling: &CsrMatrix, mode: MaxMode) -> Result<Self> {
+        if pooling.cols() == 0 {
+            return Err(ConvError::argument(
+                "MaxKernel::from_matrix",
+                "pooling",
+                "0 fine vertices is not a usable pooling matrix",
+            ));
+        }
+        check_u32("MaxKernel::from_matrix", pooling)?;
+        Ok(Self {
+            pattern: Arc::new(Csr::from_matrix(pooling)),
+            pattern_t: Arc::new(Csr::from_matrix(&pooling.transpose())),
+            mode,
+        })
+    }
+
+    /// What the kernel selects.
+    pub fn mode(&self) -> MaxMode {
+        self.mode
+    }
+
+    /// The clusters (the pooling matrix's pattern).
+    pub(crate) fn pattern(&self) -> &Csr {
+        &self.pattern
+    }
+
+    /// The transposed pattern: row j lists the clusters holding fine vertex j.
+    pub(crate) fn pattern_t(&self) -> &Csr {
+        &self.pattern_t
+    }
+
+    /// Max pooling of x `[fine, n]` into y `[coarse, n]` (every one of a vertex's n values
+    /// pooled on its own, as [`MaxPool::forward_vertex_major`]); `arg` (`[coarse, n]`)
+    /// receives the selected fine vertex (`u32::MAX` for an empty cluster).
     pub fn forward_into<T: Float>(
         &self,
         x: &[T],
@@ -361,12 +404,12 @@ impl MaxPool {
         arg: &mut [u32],
         n: usize,
     ) -> Result<()> {
-        const OP: &str = "MaxPool::forward_into";
-        let p = self.pattern();
+        const OP: &str = "MaxKernel::forward_into";
+        let p = &self.pattern;
         check_len(OP, "x", x.len(), p.cols() * n)?;
         check_len(OP, "y", y.len(), p.rows() * n)?;
         check_len(OP, "arg", arg.len(), p.rows() * n)?;
-        max_pool(p, x, y, arg, n, self.mode());
+        max_pool(p, x, y, arg, n, self.mode);
         Ok(())
     }
 
@@ -380,13 +423,37 @@ impl MaxPool {
         dx: &mut [T],
         n: usize,
     ) -> Result<()> {
-        const OP: &str = "MaxPool::backward_into";
-        let p = self.pattern();
+        const OP: &str = "MaxKernel::backward_into";
+        let p = &self.pattern;
         check_len(OP, "g", g.len(), p.rows() * n)?;
         check_len(OP, "arg", arg.len(), p.rows() * n)?;
         check_len(OP, "dx", dx.len(), p.cols() * n)?;
-        max_unpool(self.pattern_t(), arg, g, dx, n);
+        max_unpool(&self.pattern_t, arg, g, dx, n);
         Ok(())
+    }
+}
+
+impl MaxPool {
+    /// [`MaxKernel::forward_into`] with this layer's kernel.
+    pub fn forward_into<T: Float>(
+        &self,
+        x: &[T],
+        y: &mut [T],
+        arg: &mut [u32],
+        n: usize,
+    ) -> Result<()> {
+        self.kernel().forward_into(x, y, arg, n)
+    }
+
+    /// [`MaxKernel::backward_into`] with this layer's kernel.
+    pub fn backward_into<T: Float>(
+        &self,
+        arg: &[u32],
+        g: &[T],
+        dx: &mut [T],
+        n: usize,
+    ) -> Result<()> {
+        self.kernel().backward_into(arg, g, dx, n)
     }
 }
 

@@ -246,6 +246,18 @@ fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
     let lhs: f64 = g.iter().zip(&py).map(|(a, b)| a * b).sum();
     let rhs: f64 = dx.iter().zip(&x).map(|(a, b)| a * b).sum();
     assert!((lhs - rhs).abs() < 1e-10 * lhs.abs().max(1.0));
+
+    // The kernel built from the matrix alone (no device) selects and scatters the same.
+    let kernel = MaxKernel::from_matrix(&m, MaxMode::SignedMagnitude).unwrap();
+    let (mut ky, mut karg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
+    kernel.forward_into(&x, &mut ky, &mut karg, n).unwrap();
+    assert_eq!((ky, karg), (py, arg.clone()));
+    let mut kdx = vec![0.0; 70 * n];
+    kernel.backward_into(&arg, &g, &mut kdx, n).unwrap();
+    assert_eq!(kdx, dx);
+    let empty = CsrMatrix::from_triplets(3, 0, &[]).unwrap();
+    let err = MaxKernel::from_matrix(&empty, MaxMode::Plain).unwrap_err();
+    assert!(err.to_string().contains("0 fine vertices"), "{err}");
 }
 
 #[test]

@@ -87,7 +87,7 @@ mod transpose;
 #[cfg(test)]
 mod vertex_major_tests;
 
-pub use buffers::{ChebKernel, ConvDims, Float, SparseKernel};
+pub use buffers::{ChebKernel, ConvDims, Float, MaxKernel, SparseKernel};
 pub use cheb::{ChebConfig, ChebConv};
 pub use error::{ConvError, Result};
 pub use max_kernel::MaxMode;

@@ -11,6 +11,7 @@
 //! The first three are [`SparseOp`] products; `MaxPool` is a custom op that records the selected
 //! members for its backward pass, with a candle-ops fallback for other devices.
 
+use crate::buffers::MaxKernel;
 use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real};
 use crate::max_kernel::{MaxMode, max_pool, max_unpool};
@@ -83,10 +84,8 @@ sparse_layer!(
 /// mode it selects exactly as the kernel.
 #[derive(Debug, Clone)]
 pub struct MaxPool {
-    pattern: Arc<Csr>,
-    /// The transposed pattern (fine vertex → the rows holding it), for the backward pass.
-    pattern_t: Arc<Csr>,
-    mode: MaxMode,
+    /// The CPU kernel: the pattern, its transpose and the mode.
+    kernel: MaxKernel,
     backend: Backend,
     device: Device,
     /// Fallback: the members of every cluster, padded to `width` (with the first member, or
@@ -107,17 +106,8 @@ impl MaxPool {
     /// Max pooling of the given mode over the rows of `pooling` (coarse × fine; for graph
     /// pooling its membership pattern), for inputs on `device`.
     pub fn with_mode(pooling: &CsrMatrix, mode: MaxMode, device: &Device) -> Result<Self> {
-        if pooling.cols() == 0 || pooling.cols() > u32::MAX as usize {
-            return Err(ConvError::argument(
-                "MaxPool::new",
-                "pooling",
-                format!(
-                    "{} fine vertices is not a usable pooling matrix",
-                    pooling.cols()
-                ),
-            ));
-        }
-        let pattern = Csr::from_matrix(pooling);
+        let kernel = MaxKernel::from_matrix(pooling, mode)?;
+        let pattern = kernel.pattern();
         let rows = pattern.rows();
         let width = (0..rows)
             .map(|r| pattern.columns(r).len())
@@ -144,9 +134,7 @@ impl MaxPool {
             None
         };
         Ok(Self {
-            pattern: Arc::new(pattern),
-            pattern_t: Arc::new(Csr::from_matrix(&pooling.transpose())),
-            mode,
+            kernel,
             backend: Backend::Kernel,
             device: device.clone(),
             members,
@@ -157,7 +145,12 @@ impl MaxPool {
 
     /// What the layer selects.
     pub fn mode(&self) -> MaxMode {
-        self.mode
+        self.kernel.mode()
+    }
+
+    /// The CPU kernel, for caller-owned buffers.
+    pub fn kernel(&self) -> &MaxKernel {
+        &self.kernel
     }
 
     /// The same layer with another backend.
@@ -170,12 +163,7 @@ impl MaxPool {
 
     /// The clusters (the pooling matrix's pattern).
     pub(crate) fn pattern(&self) -> &Csr {
-        &self.pattern
-    }
-
-    /// The transposed pattern: row j lists the clusters holding fine vertex j.
-    pub(crate) fn pattern_t(&self) -> &Csr {
-        &self.pattern_t
+        self.kernel.pattern()
     }
 
     /// `[B, fine, C]` (or `[fine, C]`) → `[B, coarse, C]` (or `[coarse, C]`).
@@ -199,14 +187,14 @@ impl MaxPool {
                 ));
             }
         };
-        if x3.dim(1)? != self.pattern.cols() || !x.dtype().is_float() {
+        if x3.dim(1)? != self.pattern().cols() || !x.dtype().is_float() {
             return Err(ConvError::input(
                 OP,
                 format!(
                     "input {:?} of {:?}; expected {} vertices of a float dtype",
                     x.dims(),
                     x.dtype(),
-                    self.pattern.cols()
+                    self.pattern().cols()
                 ),
             ));
         }
@@ -218,9 +206,7 @@ impl MaxPool {
         }
         let y = if use_kernel(backend, &x3) {
             x3.contiguous()?.apply_op1(MaxPoolOp {
-                pattern: self.pattern.clone(),
-                pattern_t: self.pattern_t.clone(),
-                mode: self.mode,
+                kernel: self.kernel.clone(),
                 arg: Mutex::new(None),
             })?
         } else {
@@ -246,7 +232,7 @@ impl MaxPool {
         let v = x.dim(0)?;
         let y = self.forward_with(&x.reshape((1, v, x.elem_count() / v))?, self.backend)?;
         let mut dims = x.dims().to_vec();
-        dims[0] = self.pattern.rows();
+        dims[0] = self.pattern().rows();
         Ok(y.reshape(dims)?)
     }
 
@@ -256,12 +242,12 @@ impl MaxPool {
     /// gather it (differentiable).
     fn fallback(&self, x: &Tensor) -> Result<Tensor> {
         let (batch, _, c) = x.dims3()?;
-        let rows = self.pattern.rows();
+        let rows = self.pattern().rows();
         let grouped = x
             .index_select(&self.members, 1)?
             .reshape((batch, rows, self.width, c))?;
         let imax = grouped.argmax_keepdim(2)?;
-        let pick = match self.mode {
+        let pick = match self.mode() {
             MaxMode::Plain => imax,
             MaxMode::SignedMagnitude => {
                 let imin = grouped.argmin_keepdim(2)?;
@@ -280,9 +266,7 @@ impl MaxPool {
 
 /// The custom op; keeps the selected members (`[B, P, C]` vertex indices) for `bwd`.
 struct MaxPoolOp {
-    pattern: Arc<Csr>,
-    pattern_t: Arc<Csr>,
-    mode: MaxMode,
+    kernel: MaxKernel,
     arg: Mutex<Option<Arc<Vec<u32>>>>,
 }
 
@@ -291,19 +275,26 @@ impl MaxPoolOp {
         let &[batch, v, c] = dims else {
             candle_core::bail!("max-pool: expected a rank-3 input, got {dims:?}");
         };
-        if v != self.pattern.cols() {
+        if v != self.kernel.pattern().cols() {
             candle_core::bail!(
                 "max-pool: {v} vertices, the pooling has {}",
-                self.pattern.cols()
+                self.kernel.pattern().cols()
             );
         }
-        let n = batch * self.pattern.rows() * c;
+        let n = batch * self.kernel.pattern().rows() * c;
         let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
-        max_pool(&self.pattern, x, &mut y, &mut arg, c, self.mode);
+        max_pool(
+            self.kernel.pattern(),
+            x,
+            &mut y,
+            &mut arg,
+            c,
+            self.kernel.mode(),
+        );
         if let Ok(mut saved) = self.arg.lock() {
             *saved = Some(Arc::new(arg));
         }
-        Ok((y, Shape::from((batch, self.pattern.rows(), c))))
+        Ok((y, Shape::from((batch, self.kernel.pattern().rows(), c))))
     }
 
     fn unpool<T: Real + candle_core::WithDType>(
@@ -322,9 +313,16 @@ impl MaxPoolOp {
                 };
                 let (lo, hi) = contiguous_span("max-pool", layout)?;
                 let xs = &T::cpu_storage_as_slice(cpu)?[lo..hi];
-                let n = batch * self.pattern.rows() * c;
+                let n = batch * self.kernel.pattern().rows() * c;
                 let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
-                max_pool(&self.pattern, xs, &mut y, &mut arg, c, self.mode);
+                max_pool(
+                    self.kernel.pattern(),
+                    xs,
+                    &mut y,
+                    &mut arg,
+                    c,
+                    self.kernel.mode(),
+                );
                 Arc::new(arg)
             }
         };
@@ -338,7 +336,7 @@ impl MaxPoolOp {
             candle_core::bail!("max-pool: gradient of shape {:?}", layout.dims());
         }
         let mut dx = vec![T::ZERO; batch * v * c];
-        max_unpool(&self.pattern_t, &arg, gs, &mut dx, c);
+        max_unpool(&self.kernel.pattern_t(), &arg, gs, &mut dx, c);
         Tensor::from_vec(dx, (batch, v, c), x.device())
     }
 }

@@ -10,7 +10,7 @@ use crate::net::config::FEATURE_CHANNELS;
 use crate::train::adam::{Adam, GradSource};
 use crate::train::loss::LossWeights;
 use candle_core::{Layout, Storage, Tensor, Var};
-use spectral_conv::{ChebKernel, MaxPool, SparseKernel};
+use spectral_conv::{ChebKernel, MaxKernel, SparseKernel};
 
 mod build;
 mod conv_weight;
@@ -64,7 +64,7 @@ struct Conv {
 #[derive(Debug)]
 enum PoolOp {
     Sparse(SparseKernel),
-    Max(MaxPool, Vec<u32>),
+    Max(MaxKernel, Vec<u32>),
     Identity,
 }
 

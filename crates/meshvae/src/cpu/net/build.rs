@@ -6,9 +6,9 @@ use crate::cpu::{Scalar, of};
 use crate::error::Result;
 use crate::net::config::FEATURE_CHANNELS;
 use crate::net::plan::{ConvStep, ConvVars, PoolStep, Step};
-use candle_core::{Device, Var};
+use candle_core::Var;
 use mesh_hierarchy::PoolMode;
-use spectral_conv::{ChebKernel, MaxMode, MaxPool, SparseKernel};
+use spectral_conv::{ChebKernel, MaxKernel, MaxMode, SparseKernel};
 
 /// When level 0 is renumbered: more than this share of its neighbours lie more than
 /// [`FAR_WINDOW`] positions apart. 1,024 vertex blocks (1.2 MB at B = 32, C = 9) is beyond the
@@ -125,7 +125,7 @@ impl<T: Scalar> Net<T> {
                 ))
             };
             let max = |mode: MaxMode| -> Result<PoolOp> {
-                let pool = MaxPool::with_mode(&step.matrix, mode, &Device::Cpu)?;
+                let pool = MaxKernel::from_matrix(&step.matrix, mode)?;
                 Ok(PoolOp::Max(pool, vec![0; v_out * c * max_batch]))
             };
             let op = match (step.mode, step.is_depool()) {
