@@ -336,7 +336,7 @@ impl MaxPoolOp {
             candle_core::bail!("max-pool: gradient of shape {:?}", layout.dims());
         }
         let mut dx = vec![T::ZERO; batch * v * c];
-        max_unpool(&self.kernel.pattern_t(), &arg, gs, &mut dx, c);
+        max_unpool(self.kernel.pattern_t(), &arg, gs, &mut dx, c);
         Tensor::from_vec(dx, (batch, v, c), x.device())
     }
 }
