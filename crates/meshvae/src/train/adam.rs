@@ -14,7 +14,7 @@ use crate::candle::ops::Real;
 use crate::error::{Result, VaeError};
 use candle_core::backprop::GradStore;
 use candle_core::{DType, Tensor, Var};
-use kernels::{AdamApply, FusedUpdate, Moment, with_slice_mut};
+use kernels::{FusedUpdate, update_slot};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
@@ -41,7 +41,7 @@ impl Default for AdamConfig {
 
 /// One optimised variable and its moments.
 #[derive(Debug)]
-struct Slot {
+pub(super) struct Slot {
     name: String,
     var: Var,
     m: Var,
@@ -165,10 +165,29 @@ impl Adam {
         let t = self.bias_steps();
         let scale_m = 1.0 / (1.0 - beta1.powi(t));
         let scale_v = 1.0 / (1.0 - beta2.powi(t));
+        let update = FusedUpdate {
+            beta1,
+            beta2,
+            scale_m,
+            scale_v,
+            lr,
+            eps,
+            l2,
+        };
         for slot in &self.slots {
             let Some(g) = grads.get(&slot.var) else {
                 continue;
             };
+            if crate::candle::ops::fusable(g) && g.dtype() == slot.var.dtype() {
+                // The CPU path: the engine's one-pass update (L2 gradient added inside).
+                let g = g.contiguous()?;
+                match g.dtype() {
+                    DType::F32 => update_slot::<f32>(slot, &g, &update)?,
+                    _ => update_slot::<f64>(slot, &g, &update)?,
+                }
+                continue;
+            }
+            // Other devices and dtypes: the same arithmetic as candle ops.
             let with_l2;
             let g = if l2 != 0.0 {
                 with_l2 = (g + slot.var.as_tensor().affine(l2, 0.0)?)?;
@@ -176,33 +195,6 @@ impl Adam {
             } else {
                 g
             };
-            if crate::candle::ops::fusable(g) && g.dtype() == slot.var.dtype() {
-                // In place, three passes, no allocation (the same arithmetic as below).
-                let g = g.contiguous()?;
-                slot.m.inplace_op2(
-                    &g,
-                    &Moment {
-                        beta: beta1,
-                        square: false,
-                    },
-                )?;
-                slot.v.inplace_op2(
-                    &g,
-                    &Moment {
-                        beta: beta2,
-                        square: true,
-                    },
-                )?;
-                let apply = AdamApply {
-                    scale_m,
-                    scale_v,
-                    lr,
-                    eps,
-                };
-                slot.var
-                    .inplace_op3(slot.m.as_tensor(), slot.v.as_tensor(), &apply)?;
-                continue;
-            }
             let m = ((slot.m.as_tensor() * beta1)? + (g * (1.0 - beta1))?)?;
             let v = ((slot.v.as_tensor() * beta2)? + (g.sqr()? * (1.0 - beta2))?)?;
             let m_hat = (&m * scale_m)?;
@@ -283,11 +275,7 @@ impl Adam {
         };
         let mut half_sq = 0.0;
         for (s, g) in self.slots.iter().zip(grads) {
-            half_sq += with_slice_mut::<T, _>(s.var.as_tensor(), |theta| {
-                with_slice_mut::<T, _>(s.m.as_tensor(), |m| {
-                    with_slice_mut::<T, _>(s.v.as_tensor(), |v| Ok(update.run(theta, m, v, g)))
-                })
-            })?;
+            half_sq += update.run_on(s, g)?;
         }
         Ok(half_sq)
     }

@@ -1,128 +1,14 @@
-//! [`Adam`](super::Adam)'s fused CPU update kernels (f32/f64): the in-place moment and apply
-//! ops of [`Adam::step_with_l2`](super::Adam::step_with_l2), and the one-pass update over θ, m,
-//! v and the gradient (whole or made row block by row block, [`GradSource`]) of the engine's
-//! step. Both do the same operations in the same order, so both paths update identically.
+//! [`Adam`](super::Adam)'s CPU update (f32/f64): one pass over θ, m, v and the gradient (whole,
+//! or made row block by row block: [`GradSource`]), for the engine's step and for candle's
+//! gradients alike.
 
+use super::Slot;
 use crate::candle::ops::{CHUNK, Real, span, span_mut};
 use crate::error::{Result, VaeError};
-use candle_core::{CpuStorage, InplaceOp1, InplaceOp2, InplaceOp3, Layout, Tensor, bail};
+use candle_core::{CpuStorage, InplaceOp1, Layout, Tensor, bail};
 use rayon::prelude::*;
 use std::cell::RefCell;
 
-/// In place: m ← β·m + (1−β)·g (`square`: g² instead of g), the arithmetic of candle's AdamW.
-pub(super) struct Moment {
-    pub beta: f64,
-    pub square: bool,
-}
-
-impl InplaceOp2 for Moment {
-    fn name(&self) -> &'static str {
-        "adam-moment"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &mut CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-    ) -> candle_core::Result<()> {
-        fn run<T: Real>(m: &mut [T], g: &[T], beta: f64, square: bool) {
-            let (b, c) = (T::of(beta), T::of(1.0 - beta));
-            m.par_chunks_mut(CHUNK)
-                .zip(g.par_chunks(CHUNK))
-                // `move`: coefficients read through references are reloaded every element.
-                .for_each(move |(m, g)| {
-                    for (m, &g) in m.iter_mut().zip(g) {
-                        let g = if square { g * g } else { g };
-                        *m = *m * b + g * c;
-                    }
-                });
-        }
-        if l1.shape() != l2.shape() {
-            bail!("adam-moment: shapes {:?} and {:?}", l1.shape(), l2.shape());
-        }
-        match (s1, s2) {
-            (CpuStorage::F32(m), CpuStorage::F32(g)) => run(
-                span_mut("adam", m, l1)?,
-                span("adam", g, l2)?,
-                self.beta,
-                self.square,
-            ),
-            (CpuStorage::F64(m), CpuStorage::F64(g)) => run(
-                span_mut("adam", m, l1)?,
-                span("adam", g, l2)?,
-                self.beta,
-                self.square,
-            ),
-            _ => bail!("adam-moment: f32 or f64 of one dtype only"),
-        }
-        Ok(())
-    }
-}
-
-/// In place: θ ← θ − lr · (m·scale_m) / (√(v·scale_v) + ε).
-pub(super) struct AdamApply {
-    pub scale_m: f64,
-    pub scale_v: f64,
-    pub lr: f64,
-    pub eps: f64,
-}
-
-impl InplaceOp3 for AdamApply {
-    fn name(&self) -> &'static str {
-        "adam-apply"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &mut CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-        s3: &CpuStorage,
-        l3: &Layout,
-    ) -> candle_core::Result<()> {
-        fn run<T: Real>(theta: &mut [T], m: &[T], v: &[T], a: &AdamApply) {
-            let (sm, sv, lr, eps) = (
-                T::of(a.scale_m),
-                T::of(a.scale_v),
-                T::of(a.lr),
-                T::of(a.eps),
-            );
-            theta
-                .par_chunks_mut(CHUNK)
-                .zip(m.par_chunks(CHUNK).zip(v.par_chunks(CHUNK)))
-                .for_each(move |(t, (m, v))| {
-                    for ((t, &m), &v) in t.iter_mut().zip(m).zip(v) {
-                        *t = *t - (m * sm) / ((v * sv).sqrt() + eps) * lr;
-                    }
-                });
-        }
-        if l1.shape() != l2.shape() || l1.shape() != l3.shape() {
-            bail!("adam-apply: shapes differ");
-        }
-        match (s1, s2, s3) {
-            (CpuStorage::F32(t), CpuStorage::F32(m), CpuStorage::F32(v)) => run(
-                span_mut("adam", t, l1)?,
-                span("adam", m, l2)?,
-                span("adam", v, l3)?,
-                self,
-            ),
-            (CpuStorage::F64(t), CpuStorage::F64(m), CpuStorage::F64(v)) => run(
-                span_mut("adam", t, l1)?,
-                span("adam", m, l2)?,
-                span("adam", v, l3)?,
-                self,
-            ),
-            _ => bail!("adam-apply: f32 or f64 of one dtype only"),
-        }
-        Ok(())
-    }
-}
-
-/// Adam's arithmetic as [`Moment`] and [`AdamApply`] do it (same operations in the same
-/// order, so both paths update identically), fused into one pass with g ← g + l2·θ.
 /// One variable's gradient for [`super::Adam::step_with_sources`].
 pub(crate) enum GradSource<'a, T> {
     /// The whole gradient, in the variable's layout.
@@ -137,6 +23,8 @@ pub(crate) enum GradSource<'a, T> {
     },
 }
 
+/// Adam's update with g ← g + l2·θ, in one pass over θ, m, v and g: the one CPU
+/// implementation, run by both the engine's step and candle's (`Adam::step_with_l2`).
 pub(super) struct FusedUpdate {
     pub beta1: f64,
     pub beta2: f64,
@@ -148,6 +36,16 @@ pub(super) struct FusedUpdate {
 }
 
 impl FusedUpdate {
+    /// Updates one slot's θ, m, v in place (CPU tensors of type `T`); returns ½Σθ² of θ
+    /// before the update.
+    pub(super) fn run_on<T: Real>(&self, s: &Slot, g: &GradSource<T>) -> Result<f64> {
+        with_slice_mut::<T, _>(s.var.as_tensor(), |theta| {
+            with_slice_mut::<T, _>(s.m.as_tensor(), |m| {
+                with_slice_mut::<T, _>(s.v.as_tensor(), |v| Ok(self.run(theta, m, v, g)))
+            })
+        })
+    }
+
     /// Updates θ, m, v in place; returns ½Σθ² of θ before the update.
     pub(super) fn run<T: Real>(
         &self,
@@ -209,6 +107,19 @@ impl FusedUpdate {
         };
         0.5 * partial.iter().sum::<f64>()
     }
+}
+
+/// [`FusedUpdate::run_on`] with a candle gradient (a contiguous CPU tensor of type `T`).
+pub(super) fn update_slot<T: Real>(s: &Slot, g: &Tensor, update: &FusedUpdate) -> Result<()> {
+    let (store, layout) = g.storage_and_layout();
+    let candle_core::Storage::Cpu(cpu) = &*store else {
+        return Err(VaeError::argument("adam gradients", "not on the CPU"));
+    };
+    let data = T::cpu(cpu)
+        .ok_or_else(|| VaeError::argument("adam gradients", "of another dtype than θ"))?;
+    let g = span("adam", data, layout)?;
+    update.run_on(s, &GradSource::Slice(g))?;
+    Ok(())
 }
 
 /// [`FusedUpdate`]'s numbers in the element type.
