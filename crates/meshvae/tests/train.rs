@@ -866,13 +866,13 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
 #[test]
 fn candle_runs_say_why() {
     let set = small_set(7, 8);
-    for (tag, tied, engine, why) in [
-        ("tied", true, true, "tied decoder convolutions"),
-        ("no-engine", false, false, "--no-engine"),
+    for (tag, k, engine, why) in [
+        ("k9", 9, true, "K = 9"),
+        ("no-engine", 3, false, "--no-engine"),
     ] {
         let dir = scratch(&format!("executor-{tag}"));
         let mut req = request(&set, &dir, 3);
-        req.model.tie_decoder_convs = tied;
+        req.model.k = k;
         let options = TrainOptions {
             engine,
             ..options(false, false)

@@ -13,9 +13,11 @@
 //! Training also evaluates the validation and test losses on the same buffers
 //! ([`Engine::rec_error`]: z = μ, the batch norms' running statistics).
 //!
-//! It covers the unconditional model with Chebyshev convolutions (any K ≤ 8) or spatial ones
-//! (the Chebyshev kernel with K = 2 on D⁻¹A), own decoder weights, and every pooling (graph pooling is a max pool over overlapping member lists,
-//! remeshing is mean pooling), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
+//! It covers the model with Chebyshev convolutions (any K ≤ 8) or spatial ones (the Chebyshev
+//! kernel with K = 2 on D⁻¹A), own or tied decoder weights (a tied convolution runs the encoder's adjoint on the
+//! transposed operator), every pooling (graph pooling is a max pool
+//! over overlapping member lists, remeshing is mean pooling) and the conditional VAE's labels
+//! ([`Engine::forward_backward_cond`]), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
 //! anything else is declined, and training then uses candle's path, which stays the reference
 //! (`tests.rs` compares the two).
 //!
@@ -89,12 +91,6 @@ impl Engine {
         if !matches!(model.dtype(), DType::F32 | DType::F64) {
             return Some(format!("dtype {:?}", model.dtype()));
         }
-        if c.is_conditional() {
-            return Some("conditional models".into());
-        }
-        if c.tie_decoder_convs {
-            return Some("tied decoder convolutions".into());
-        }
         if c.k > 8 {
             return Some(format!("K = {} (at most 8)", c.k));
         }
@@ -132,9 +128,22 @@ impl Engine {
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<StepLoss> {
+        self.forward_backward_cond(model, x, None, eps, weights)
+    }
+
+    /// As [`Self::forward_backward`] with labels c `[B, L]` (one-hot rows as
+    /// [`MeshVae::one_hot`] makes them; `Some` exactly when the model is conditional).
+    pub fn forward_backward_cond(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        c: Option<&Tensor>,
+        eps: &Tensor,
+        weights: &LossWeights,
+    ) -> Result<StepLoss> {
         match &mut self.net {
-            Typed::F32(n) => n.step(model, x, eps, weights),
-            Typed::F64(n) => n.step(model, x, eps, weights),
+            Typed::F32(n) => n.step(model, x, c, eps, weights),
+            Typed::F64(n) => n.step(model, x, c, eps, weights),
         }
     }
 
@@ -142,9 +151,21 @@ impl Engine {
     /// batch norms' running statistics): [`MeshVae::rec_error`] without candle's per-op
     /// allocations. Does not disturb the last [`Self::forward_backward`]'s gradients.
     pub fn rec_error(&mut self, model: &MeshVae, x: &Tensor, weights: &LossWeights) -> Result<f64> {
+        self.rec_error_cond(model, x, None, weights)
+    }
+
+    /// As [`Self::rec_error`] with labels c `[B, L]` (`Some` exactly when the model is
+    /// conditional).
+    pub fn rec_error_cond(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        c: Option<&Tensor>,
+        weights: &LossWeights,
+    ) -> Result<f64> {
         match &mut self.net {
-            Typed::F32(n) => n.rec_error(model, x, weights),
-            Typed::F64(n) => n.rec_error(model, x, weights),
+            Typed::F32(n) => n.rec_error(model, x, c, weights),
+            Typed::F64(n) => n.rec_error(model, x, c, weights),
         }
     }
 

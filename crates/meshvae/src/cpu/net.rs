@@ -51,6 +51,9 @@ struct Conv {
     ci: usize,
     co: usize,
     weight: ConvWeight,
+    /// Add the weight gradient to the variables' (an encoder convolution a tied decoder
+    /// convolution shares) instead of writing it.
+    add_grad: bool,
     bn: Option<Bn>,
     tanh: bool,
     input: usize,
@@ -102,6 +105,19 @@ struct DenseVars {
     w_sigma: usize,
     b_sigma: usize,
     b_dec: usize,
+    /// A conditional model's label weights.
+    labels: Option<LabelVars>,
+}
+
+/// A conditional model's label weights (indices into the trainable list): `[L, latent]` into
+/// μ and into σ's pre-activation, `[L, V_L·C]` into the decoder's dense layer.
+#[derive(Debug, Clone, Copy)]
+struct LabelVars {
+    mu: usize,
+    sigma: usize,
+    dec: usize,
+    /// L, the number of labels.
+    count: usize,
 }
 
 /// Activation buffers, each sized for the largest batch.
@@ -168,6 +184,8 @@ pub(super) struct Net<T> {
     /// The full-resolution vertices' order in the engine's buffers (`order[p]`: the template
     /// vertex at position p), when they are renumbered for locality (see `build.rs`).
     order: Option<Vec<u32>>,
+    /// The batch's one-hot labels `[B, L]` (conditional models).
+    cond: Vec<T>,
 }
 
 fn internal(what: impl Into<String>) -> VaeError {
@@ -215,7 +233,7 @@ impl<T: Scalar> Net<T> {
     }
 
     /// Checks the inputs' shapes and copies them into the engine's buffers; returns B.
-    fn load_inputs(&mut self, x: &Tensor, eps: &Tensor) -> Result<usize> {
+    fn load_inputs(&mut self, x: &Tensor, c: Option<&Tensor>, eps: &Tensor) -> Result<usize> {
         let dims = x.dims();
         let batch = match dims {
             &[b, v, c] if b >= 1 && v == self.v0 && c == FEATURE_CHANNELS => b,
@@ -253,18 +271,53 @@ impl<T: Scalar> Net<T> {
         let (es, el) = eps.storage_and_layout();
         let ed = cpu_slice::<T>(&es, el, "ε")?;
         self.lat.eps[..ed.len()].copy_from_slice(ed);
+        self.load_labels(c, batch)?;
         Ok(batch)
+    }
+
+    /// Copies the one-hot labels `[B, L]`, given exactly when the model is conditional.
+    fn load_labels(&mut self, c: Option<&Tensor>, batch: usize) -> Result<()> {
+        const OP: &str = "Engine::forward_backward";
+        match (c, self.dense.labels) {
+            (None, None) => Ok(()),
+            (Some(_), None) => Err(VaeError::argument(
+                "label",
+                format!("{OP}: the model is not conditional"),
+            )),
+            (None, Some(_)) => Err(VaeError::argument(
+                "label",
+                format!("{OP}: the model is conditional; give each mesh's label"),
+            )),
+            (Some(c), Some(labels)) => {
+                if c.dims() != [batch, labels.count] {
+                    return Err(VaeError::shape(
+                        OP,
+                        format!(
+                            "labels of shape {:?}; expected [{batch}, {}]",
+                            c.dims(),
+                            labels.count
+                        ),
+                    ));
+                }
+                let c = c.contiguous()?;
+                let (cs, cl) = c.storage_and_layout();
+                let cd = cpu_slice::<T>(&cs, cl, "the labels")?;
+                self.cond[..cd.len()].copy_from_slice(cd);
+                Ok(())
+            }
+        }
     }
 
     pub fn step(
         &mut self,
         model: &MeshVae,
         x: &Tensor,
+        c: Option<&Tensor>,
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<StepLoss> {
         self.check_model(model)?;
-        let batch = self.load_inputs(x, eps)?;
+        let batch = self.load_inputs(x, c, eps)?;
         let (vars, names) = (self.vars.clone(), self.names.clone());
         let loss = with_weights(&vars, &names, |w| {
             let loss = self.forward(w, batch, weights)?;
@@ -315,6 +368,27 @@ impl<T: Scalar> Net<T> {
         matmul(&mut lat.mu, (l, 1), h_rows, wm, (batch, l, kf), false);
         // The pre-activation of σ goes into `sig` first.
         matmul(&mut lat.sig, (l, 1), h_rows, ws, (batch, l, kf), false);
+        // A conditional model adds c·W_c to both pre-activations.
+        if let Some(labels) = d.labels {
+            let c = Mat::row_major(&self.cond[..batch * labels.count], labels.count);
+            let dims = (batch, l, labels.count);
+            matmul(
+                &mut lat.mu,
+                (l, 1),
+                c,
+                Mat::row_major(w[labels.mu], l),
+                dims,
+                true,
+            );
+            matmul(
+                &mut lat.sig,
+                (l, 1),
+                c,
+                Mat::row_major(w[labels.sigma], l),
+                dims,
+                true,
+            );
+        }
         let mut kl = 0.0;
         let two: T = of(2.0);
         for i in 0..batch * l {
@@ -335,6 +409,13 @@ impl<T: Scalar> Net<T> {
         let dec = &mut self.acts.0[self.dec_in][..kf * batch];
         let zt = Mat::col_major(&lat.z[..batch * l], l);
         matmul(dec, (batch, 1), wm, zt, (kf, batch, l), false);
+        if let Some(labels) = d.labels {
+            // + W_dcᵀ cᵀ: [K, L] · [L, B].
+            let n = labels.count;
+            let w_dc = Mat::col_major(w[labels.dec], kf);
+            let ct = Mat::col_major(&self.cond[..batch * n], n);
+            matmul(dec, (batch, 1), w_dc, ct, (kf, batch, n), true);
+        }
         k::add_row_bias(dec, w[d.b_dec], batch);
         0.5 * kl / batch as f64
     }
@@ -411,6 +492,38 @@ impl<T: Scalar> Net<T> {
             }
         }
         let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
+        if let Some(labels) = d.labels {
+            // dW_c = cᵀ (∂L/∂μ), cᵀ (∂L/∂s); dW_dc = cᵀ gᵀ.
+            let n = labels.count;
+            let ct = Mat::col_major(&self.cond[..batch * n], n);
+            let dims = (n, l, batch);
+            let grads = &mut self.grads;
+            matmul(
+                &mut grads[labels.mu],
+                (l, 1),
+                ct,
+                Mat::row_major(dmu, l),
+                dims,
+                false,
+            );
+            matmul(
+                &mut grads[labels.sigma],
+                (l, 1),
+                ct,
+                Mat::row_major(ds, l),
+                dims,
+                false,
+            );
+            let gt = Mat::col_major(g, batch);
+            matmul(
+                &mut grads[labels.dec],
+                (kf, 1),
+                ct,
+                gt,
+                (n, kf, batch),
+                false,
+            );
+        }
         let gb = &mut self.gb[..kf * batch];
         let (dmu_cols, ds_cols) = (Mat::col_major(dmu, l), Mat::col_major(ds, l));
         matmul(gb, (batch, 1), wm, dmu_cols, (kf, batch, l), false);

@@ -57,6 +57,30 @@ fn rel_diff(a: &[f64], b: &[f64], floor: f64) -> f64 {
         / scale
 }
 
+/// For a conditional model: one-hot labels cycling through its labels, and the same random
+/// label weights in both models (they start at zero, which would hide their forward use).
+fn labels(reference: &MeshVae, ours: &MeshVae, batch: usize) -> Option<Tensor> {
+    let names = reference.labels();
+    if names.is_empty() {
+        return None;
+    }
+    for (k, name) in crate::net::vars::LABEL_NAMES.iter().enumerate() {
+        for model in [reference, ours] {
+            let (_, var) = model
+                .trainable_vars()
+                .into_iter()
+                .find(|(n, _)| n == name)
+                .unwrap();
+            let mut rng = Rng::new(60 + k as u64);
+            let t = rng.normal_tensor(var.dims(), &Device::Cpu).unwrap();
+            var.set(&(t * 0.1).unwrap().to_dtype(var.dtype()).unwrap())
+                .unwrap();
+        }
+    }
+    let picked: Vec<&String> = (0..batch).map(|b| &names[(b * 2) % names.len()]).collect();
+    Some(reference.one_hot(&picked).unwrap())
+}
+
 /// One step on both paths; asserts the loss terms, gradients and running stats agree to `tol`.
 fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     let (reference, ours) = models(config, dtype);
@@ -66,13 +90,23 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
         l2: 1.0,
     };
     let (x, eps) = inputs(&reference, batch, 3);
-    let loss = reference.training_loss(&x, &eps, &weights).unwrap();
+    let c = labels(&reference, &ours, batch);
+    let loss = reference
+        .training_loss_cond(&x, c.as_ref(), &eps, &weights)
+        .unwrap();
     let grads = reference.backward(&loss.total).unwrap();
     let mut engine = Engine::new(&ours, batch + 2).unwrap();
-    let got = engine.forward_backward(&ours, &x, &eps, &weights).unwrap();
+    let got = engine
+        .forward_backward_cond(&ours, &x, c.as_ref(), &eps, &weights)
+        .unwrap();
     let case = format!(
-        "{} {} {:?} K={} {dtype:?}",
-        config.structure, config.conv, config.pool, config.k
+        "{} {} {:?} K={} labels {:?} tied {} {dtype:?}",
+        config.structure,
+        config.conv,
+        config.pool,
+        config.k,
+        config.labels,
+        config.tie_decoder_convs
     );
     // Mean-type poolings and sampling leave level 0 through a sparse operator: the engine then
     // runs it renumbered, so these comparisons check the renumbering too.
@@ -159,6 +193,28 @@ fn loss_gradients_and_running_stats_equal_candle_autograd_in_f64() {
         latent: 5,
         ..Default::default()
     });
+    // Tied decoder convolutions (the adjoints of the encoder's, on the transposed operators;
+    // the encoder's weights get both gradients), spectral and spatial.
+    for (conv, structure) in [(ConvKind::Spectral, "CPCPC"), (ConvKind::Spatial, "CCPC")] {
+        configs.push(ModelConfig {
+            conv,
+            structure: structure.parse().unwrap(),
+            tie_decoder_convs: true,
+            channels: 5,
+            latent: 6,
+            ..Default::default()
+        });
+    }
+    // A conditional model (labels into both heads and the decoder's dense layer).
+    let names = ["gallop", "trot", "pose"].map(String::from);
+    configs.push(
+        ModelConfig {
+            channels: 5,
+            latent: 6,
+            ..Default::default()
+        }
+        .conditional_on(&names),
+    );
     for config in &configs {
         compare_step(config, DType::F64, 3, 1e-10);
     }
@@ -288,17 +344,42 @@ fn training_steps_match_candle_and_repeat_bit_for_bit_on_any_thread_count() {
 
 #[test]
 fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
-    let tied = ModelConfig {
-        tie_decoder_convs: true,
+    let wide = ModelConfig {
+        k: 9,
         latent: 4,
         ..Default::default()
     };
-    let (model, _) = models(&tied, DType::F32);
-    assert!(Engine::unsupported(&model).unwrap().contains("tied"));
+    let (model, _) = models(&wide, DType::F32);
+    assert!(Engine::unsupported(&model).unwrap().contains("K = 9"));
     let err = Engine::new(&model, 2).unwrap_err().to_string();
     assert!(
-        err.contains("does not cover") && err.contains("tied"),
+        err.contains("does not cover") && err.contains("K = 9"),
         "{err}"
+    );
+
+    // Labels come exactly with a conditional model.
+    let names = ["a", "b"].map(String::from);
+    let conditional = ModelConfig {
+        latent: 4,
+        ..Default::default()
+    }
+    .conditional_on(&names);
+    let (model, _) = models(&conditional, DType::F64);
+    let mut engine = Engine::new(&model, 2).unwrap();
+    let (x, eps) = inputs(&model, 2, 1);
+    let w = LossWeights::default();
+    let err = engine.forward_backward(&model, &x, &eps, &w).unwrap_err();
+    assert!(err.to_string().contains("give each mesh's label"), "{err}");
+    let c = model.one_hot(&["a"]).unwrap();
+    let err = engine
+        .forward_backward_cond(&model, &x, Some(&c), &eps, &w)
+        .unwrap_err();
+    assert!(err.to_string().contains("[2, 2]"), "{err}");
+    let c = model.one_hot(&["a", "b"]).unwrap();
+    assert!(
+        engine
+            .forward_backward_cond(&model, &x, Some(&c), &eps, &w)
+            .is_ok()
     );
 
     let config = ModelConfig {

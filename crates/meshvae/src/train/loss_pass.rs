@@ -34,12 +34,10 @@ pub(super) fn epoch_loss(
     let mut sum = 0.0;
     for chunk in ids.chunks(batch.max(1)) {
         let x = data.batch(chunk, device)?;
+        let c = data.conditions(model, chunk)?;
         let error = match engine.as_deref_mut() {
-            Some(engine) => engine.rec_error(model, &x, weights)?,
-            None => {
-                let c = data.conditions(model, chunk)?;
-                model.rec_error_cond(&x, c.as_ref(), weights)?
-            }
+            Some(engine) => engine.rec_error_cond(model, &x, c.as_ref(), weights)?,
+            None => model.rec_error_cond(&x, c.as_ref(), weights)?,
         };
         sum += error * chunk.len() as f64;
     }

@@ -276,8 +276,9 @@ pub fn train(
             }
             let w_l2 = spec.train.loss.l2;
             let (total, rec, kl, l2) = match (engine.as_mut(), &c) {
-                (Some(engine), None) => {
-                    let l = engine.forward_backward(&model, &x, &eps, &spec.train.loss)?;
+                (Some(engine), c) => {
+                    let loss = &spec.train.loss;
+                    let l = engine.forward_backward_cond(&model, &x, c.as_ref(), &eps, loss)?;
                     if !(l.rec + l.kl).is_finite() {
                         let l2 = model.l2_term()?.to_dtype(candle_core::DType::F64)?;
                         let l2 = l2.to_scalar::<f64>()? * w_l2;

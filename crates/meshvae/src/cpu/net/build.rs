@@ -1,6 +1,9 @@
 //! Building the engine's network from a model's plan: its layer list and buffers.
 
-use super::{Acts, Bn, Conv, ConvWeight, DenseVars, Latent, Net, Node, Pool, PoolOp, internal};
+use super::conv_weight::Adjoint;
+use super::{
+    Acts, Bn, Conv, ConvWeight, DenseVars, LabelVars, Latent, Net, Node, Pool, PoolOp, internal,
+};
 use crate::candle::model::MeshVae;
 use crate::cpu::{Scalar, of};
 use crate::error::Result;
@@ -59,21 +62,41 @@ impl<T: Scalar> Net<T> {
          -> Result<Node> {
             let s = step.spec;
             let v = counts[s.level];
-            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions.
-            let (kernel_k, weight) = match step.weights {
-                ConvVars::Cheb(w) => (config.k, ConvWeight::Stacked(w.0)),
-                ConvVars::Spatial { w_self, w_nb } => (
+            // The level's operator is L̃ for spectral and D⁻¹A for spatial convolutions; a tied
+            // decoder convolution runs on its transpose.
+            let own = |vars: ConvVars| match vars {
+                ConvVars::Cheb(w) => Some((config.k, ConvWeight::Stacked(w.0))),
+                ConvVars::Spatial { w_self, w_nb } => Some((
                     2,
                     ConvWeight::Pair {
                         w_self: w_self.0,
                         w_nb: w_nb.0,
                     },
-                ),
-                ConvVars::Tied => {
-                    return Err(internal("the engine does not run tied convolutions"));
+                )),
+                ConvVars::Tied => None,
+            };
+            let operator = plan.operator(s.level);
+            let (weight, mut kernel) = match own(step.weights) {
+                Some((k, weight)) => (weight, ChebKernel::from_matrix(operator, k)?),
+                None => {
+                    let mirror = plan.encoder.iter().find_map(|e| match e {
+                        Step::Conv(c) if c.spec.index == s.index => own(c.weights),
+                        _ => None,
+                    });
+                    let adjoint = match mirror {
+                        Some((k, ConvWeight::Stacked(w))) => Adjoint::Cheb { w, k },
+                        Some((_, ConvWeight::Pair { w_self, w_nb })) => {
+                            Adjoint::Spatial { w_self, w_nb }
+                        }
+                        _ => return Err(internal("a tied convolution without its encoder's")),
+                    };
+                    let k = mirror.map_or(0, |(k, _)| k);
+                    let kernel = ChebKernel::from_matrix(&operator.transpose(), k)?;
+                    (ConvWeight::Adjoint(adjoint), kernel)
                 }
             };
-            let mut kernel = ChebKernel::from_matrix(plan.operator(s.level), kernel_k)?;
+            // With tied decoder convolutions every encoder convolution's weights are shared.
+            let add_grad = config.tie_decoder_convs && step.weights != ConvVars::Tied;
             if let Some(order) = at_level(s.level) {
                 kernel = kernel.permuted(order)?;
             }
@@ -99,6 +122,7 @@ impl<T: Scalar> Net<T> {
                 ci: s.c_in,
                 co: s.c_out,
                 weight,
+                add_grad,
                 bn,
                 tanh: s.tanh,
                 input,
@@ -192,6 +216,12 @@ impl<T: Scalar> Net<T> {
             w_sigma: heads.w_sigma.0,
             b_sigma: heads.b_sigma.0,
             b_dec: heads.b_dec.0,
+            labels: heads.labels.map(|ids| LabelVars {
+                mu: ids.mu.0,
+                sigma: ids.sigma.0,
+                dec: ids.dec.0,
+                count: config.labels.len(),
+            }),
         };
         // The dense weights' gradients are made block by block inside Adam's pass
         // (`Net::dense_grad_rows`), never whole.
@@ -229,6 +259,7 @@ impl<T: Scalar> Net<T> {
             work: vec![of(0.0); max_act],
             batch: 0,
             order,
+            cond: vec![of(0.0); max_batch * config.labels.len()],
         })
     }
 }

@@ -12,7 +12,13 @@ use candle_core::Tensor;
 impl<T: Scalar> Net<T> {
     /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]`, in inference mode. Leaves
     /// the last training step's gradients and batch statistics alone.
-    pub fn rec_error(&mut self, model: &MeshVae, x: &Tensor, weights: &LossWeights) -> Result<f64> {
+    pub fn rec_error(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        c: Option<&Tensor>,
+        weights: &LossWeights,
+    ) -> Result<f64> {
         self.check_model(model)?;
         // ε = 0 makes z = μ.
         let eps = Tensor::zeros((x.dim(0)?, self.latent), x.dtype(), x.device())?;
@@ -20,7 +26,7 @@ impl<T: Scalar> Net<T> {
         // (`Net::dense_grad_rows`), so a pending step's h and z are put back afterwards.
         let kept =
             (self.batch > 0).then(|| (self.acts.0[self.enc_out].clone(), self.lat.z.clone()));
-        let batch = self.load_inputs(x, &eps)?;
+        let batch = self.load_inputs(x, c, &eps)?;
         let (vars, names) = (self.vars.clone(), self.names.clone());
         with_weights(&vars, &names, |w| {
             for node in &mut self.enc {

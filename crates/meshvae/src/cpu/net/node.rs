@@ -149,7 +149,7 @@ pub(super) fn backward_node<T: Scalar>(
                 None
             };
             let weight = c.weight.stacked(w, c.co);
-            c.weight.write_grad(grads, c.co, |dw| {
+            c.weight.write_grad(grads, c.co, c.add_grad, |dw| {
                 c.kernel.backward(
                     &acts.0[c.input][..nx],
                     &acts.0[c.terms][..tl],
