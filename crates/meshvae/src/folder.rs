@@ -2,15 +2,19 @@
 //! everything around it (hierarchy, normalisation, split, template). The applications (`apps/`)
 //! work on it. The folder's layout and the files a run writes are in `train/folder.rs`.
 
+use crate::candle::batch_norm::Mode;
 use crate::candle::model::MeshVae;
+use crate::cpu::Engine;
 use crate::error::{Result, VaeError};
 use crate::train::folder::{ModelFolder, ModelSpec, SplitFile};
 use crate::train::split::{Selection, Split};
 use candle_core::Device;
+use candle_core::Tensor;
 use deform_features::Normalization;
 use mesh_hierarchy::Hierarchy;
 use mesh_io::TriMesh;
 use std::path::Path;
+use std::sync::Mutex;
 
 /// A model folder loaded for use: the network with its best weights and everything around it.
 #[derive(Debug)]
@@ -24,6 +28,9 @@ pub struct TrainedModel {
     pub template: TriMesh,
     /// Which loss chose the loaded weights.
     pub selected_on: Selection,
+    /// The CPU engine that encodes and decodes for the applications, built on first use where
+    /// it covers the model (see [`TrainedModel::reconstruct_batch`]).
+    engine: Mutex<Option<Engine>>,
 }
 
 impl TrainedModel {
@@ -111,6 +118,7 @@ impl TrainedModel {
             split,
             template,
             selected_on,
+            engine: Mutex::new(None),
         })
     }
 }
@@ -149,5 +157,55 @@ impl TrainedModel {
             })
             .map_or(0, |r| r.epoch);
         Ok((last, best))
+    }
+}
+
+/// Inference for the applications: on the CPU engine where it covers the model (the same
+/// results as candle's eval mode to rounding, without candle's per-op allocations), else
+/// through candle's model.
+impl TrainedModel {
+    /// decode(μ(x, c), c) for features x `[B, V, 9]` (labels c `[B, L]` for a conditional
+    /// model).
+    pub fn reconstruct_batch(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        match self.with_engine(x.dim(0)?, |e, m| e.reconstruct_cond(m, x, c)) {
+            Some(done) => done,
+            None => self.model.reconstruct_cond(x, c),
+        }
+    }
+
+    /// The encoder means μ `[B, latent]` of features x `[B, V, 9]`.
+    pub fn encode_mu(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        match self.with_engine(x.dim(0)?, |e, m| e.encode_cond(m, x, c)) {
+            Some(done) => done.map(|(mu, _)| mu),
+            None => Ok(self.model.encode_cond(x, c, Mode::Eval)?.mu),
+        }
+    }
+
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]`.
+    pub fn decode_batch(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        match self.with_engine(z.dim(0)?, |e, m| e.decode_cond(m, z, c)) {
+            Some(done) => done,
+            None => self.model.decode_cond(z, c, Mode::Eval),
+        }
+    }
+
+    /// Runs `f` on the engine (built on first use, rebuilt for a larger batch); `None` where
+    /// the engine does not cover the model.
+    fn with_engine<R>(
+        &self,
+        batch: usize,
+        f: impl FnOnce(&mut Engine, &MeshVae) -> Result<R>,
+    ) -> Option<Result<R>> {
+        if Engine::unsupported(&self.model).is_some() {
+            return None;
+        }
+        let mut slot = self.engine.lock().unwrap_or_else(|p| p.into_inner());
+        if slot.as_ref().is_none_or(|e| e.max_batch() < batch) {
+            match Engine::new(&self.model, batch.max(1)) {
+                Ok(engine) => *slot = Some(engine),
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        slot.as_mut().map(|engine| f(engine, &self.model))
     }
 }

@@ -6,7 +6,6 @@
 //! ([`TrainedModel::generate_labelled`]); each sample's nearest training mesh then tells, by its
 //! label, whether the sample looks like the meshes of that label ([`Generated::label_share`]).
 
-use crate::candle::batch_norm::Mode;
 use crate::error::{Result, VaeError};
 use crate::folder::TrainedModel;
 use crate::numerics::rng::Rng;
@@ -142,7 +141,7 @@ impl TrainedModel {
             let c = conditions
                 .map(|c| matrix(&c[k * CHUNK..k * CHUNK + chunk.len()], labels))
                 .transpose()?;
-            let y = self.model.decode_cond(&z, c.as_ref(), Mode::Eval)?;
+            let y = self.decode_batch(&z, c.as_ref())?;
             out.extend(self.positions_from_output(&reconstructor, &y)?);
         }
         Ok(out)

@@ -2,7 +2,6 @@
 //! meshes, linearly interpolated at t = 0, 1/(steps−1), …, 1 (both ends included), decoded in
 //! inference mode.
 
-use crate::candle::batch_norm::Mode;
 use crate::error::{Result, VaeError};
 use crate::folder::TrainedModel;
 use crate::train::split::resolve_mesh;
@@ -33,7 +32,7 @@ impl TrainedModel {
                 .encode_input(&extractor, set, chunk, self.model.device())?
                 .to_dtype(self.model.dtype())?;
             let c = self.conditions(chunk)?;
-            let mu = self.model.encode_cond(&x, c.as_ref(), Mode::Eval)?.mu;
+            let mu = self.encode_mu(&x, c.as_ref())?;
             out.extend(mu.to_dtype(candle_core::DType::F32)?.to_vec2::<f32>()?);
         }
         Ok(out)

@@ -113,9 +113,7 @@ impl TrainedModel {
         let mut out = Vec::with_capacity(ids.len());
         for chunk in ids.chunks(CHUNK) {
             let x = self.encode_input(&extractor, set, chunk, device)?;
-            let y = self
-                .model
-                .reconstruct_cond(&x, self.conditions(chunk)?.as_ref())?;
+            let y = self.reconstruct_batch(&x, self.conditions(chunk)?.as_ref())?;
             out.extend(self.positions_from_output(&reconstructor, &y)?);
         }
         Ok(out)

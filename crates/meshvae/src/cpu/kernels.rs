@@ -37,6 +37,24 @@ pub(super) fn to_vcb<T: Scalar>(
         });
 }
 
+/// x `[V, C, B]` → out `[B, V, C]`, undoing [`to_vcb`]'s vertex order (`order[p]`: the
+/// template vertex at position p).
+pub(super) fn from_vcb<T: Scalar>(
+    x: &[T],
+    out: &mut [T],
+    (batch, v, c): (usize, usize, usize),
+    order: Option<&[u32]>,
+) {
+    out.par_chunks_mut(v * c).enumerate().for_each(|(b, mesh)| {
+        for p in 0..v {
+            let i = order.map_or(p, |o| o[p] as usize);
+            for ch in 0..c {
+                mesh[i * c + ch] = x[(p * c + ch) * batch + b];
+            }
+        }
+    });
+}
+
 /// Eight running f64 sums: value i of a run goes to lane i mod 8. One serial f64 sum is a chain
 /// of dependent adds (four cycles each); eight independent ones vectorise.
 type Lanes = [f64; 8];
@@ -193,7 +211,7 @@ pub(super) fn bn_backward<T: Scalar>(
                             let (m, inv) = (ms[ch], ss[ch]);
                             let step = |gv: &mut T, xv: T, ov: T, sg: &mut f64, sgx: &mut f64| {
                                 if tanh {
-                                    *gv = *gv * (one - ov * ov);
+                                    *gv *= one - ov * ov;
                                 }
                                 *sg += f64_of(*gv);
                                 *sgx += f64_of(*gv * ((xv - m) * inv));
@@ -273,7 +291,7 @@ pub(super) fn tanh_backward<T: Scalar>(y: &[T], g: &mut [T]) {
         .for_each(|(g, y)| {
             wide(|| {
                 for (g, &y) in g.iter_mut().zip(y) {
-                    *g = *g * (one - y * y);
+                    *g *= one - y * y;
                 }
             })
         });
@@ -341,6 +359,12 @@ mod tests {
         to_vcb(&x, &mut moved, (batch, v, c), Some(&order));
         let n = c * batch;
         assert_eq!(moved[5 * n..][..n], vcb[(v - 6) * n..][..n]);
+        // Back to `[B, V, C]`, the order undone.
+        for (layout, order) in [(&vcb, None), (&moved, Some(order.as_slice()))] {
+            let mut back = vec![f64::NAN; x.len()];
+            from_vcb(layout, &mut back, (batch, v, c), order);
+            assert_eq!(back, x);
+        }
         let (mean, var) = moments(&vcb, (c, batch));
         for ch in 0..c {
             let vals: Vec<f64> = x.iter().skip(ch).step_by(c).copied().collect();

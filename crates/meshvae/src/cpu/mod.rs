@@ -43,7 +43,10 @@ use candle_core::{DType, Tensor};
 use net::Net;
 
 /// The float types the engine runs on (f32, f64).
-pub(crate) trait Scalar: crate::candle::ops::Real + spectral_conv::Float {}
+pub(crate) trait Scalar:
+    crate::candle::ops::Real + spectral_conv::Float + candle_core::WithDType
+{
+}
 impl Scalar for f32 {}
 impl Scalar for f64 {}
 
@@ -166,6 +169,56 @@ impl Engine {
         match &mut self.net {
             Typed::F32(n) => n.rec_error(model, x, c, weights),
             Typed::F64(n) => n.rec_error(model, x, c, weights),
+        }
+    }
+
+    /// μ and σ `[B, latent]` of features x `[B, V, 9]` in inference mode (the batch norms'
+    /// running statistics; labels c `[B, L]` exactly when the model is conditional), as
+    /// [`MeshVae::encode_cond`] in eval mode computes them.
+    pub fn encode_cond(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        c: Option<&Tensor>,
+    ) -> Result<(Tensor, Tensor)> {
+        match &mut self.net {
+            Typed::F32(n) => n.encode(model, x, c),
+            Typed::F64(n) => n.encode(model, x, c),
+        }
+    }
+
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` in inference mode, as
+    /// [`MeshVae::decode_cond`] in eval mode.
+    pub fn decode_cond(
+        &mut self,
+        model: &MeshVae,
+        z: &Tensor,
+        c: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        match &mut self.net {
+            Typed::F32(n) => n.decode(model, z, c),
+            Typed::F64(n) => n.decode(model, z, c),
+        }
+    }
+
+    /// decode(μ(x, c), c) in inference mode, as [`MeshVae::reconstruct_cond`].
+    pub fn reconstruct_cond(
+        &mut self,
+        model: &MeshVae,
+        x: &Tensor,
+        c: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        match &mut self.net {
+            Typed::F32(n) => n.reconstruct(model, x, c),
+            Typed::F64(n) => n.reconstruct(model, x, c),
+        }
+    }
+
+    /// The largest batch the engine's buffers hold.
+    pub fn max_batch(&self) -> usize {
+        match &self.net {
+            Typed::F32(n) => n.max_batch(),
+            Typed::F64(n) => n.max_batch(),
         }
     }
 

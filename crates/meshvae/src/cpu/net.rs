@@ -223,8 +223,17 @@ fn with_weights<T: Scalar, R>(
 }
 
 impl<T: Scalar> Net<T> {
+    pub fn max_batch(&self) -> usize {
+        self.max_batch
+    }
+
     fn check_model(&self, model: &MeshVae) -> Result<()> {
-        if model.vertex_count() != self.v0 || model.trainable_vars().len() != self.vars.len() {
+        // The same variables, not only the same shapes: the engine reads them in place.
+        let vars = model.trainable_vars();
+        let same = vars.len() == self.vars.len()
+            && (vars.iter().zip(&self.vars))
+                .all(|((_, a), b)| a.as_tensor().id() == b.as_tensor().id());
+        if model.vertex_count() != self.v0 || !same {
             return Err(internal(
                 "the model is not the one the engine was built for",
             ));
@@ -356,6 +365,14 @@ impl<T: Scalar> Net<T> {
 
     /// μ, σ, z and the decoder's dense layer; returns the batch mean of the KL divergence.
     fn latent_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
+        let kl = self.heads_forward(w, batch);
+        self.dense_decode(w, batch);
+        kl
+    }
+
+    /// μ, σ and z = μ + σ ε from the encoder's output; returns the batch mean of the KL
+    /// divergence.
+    fn heads_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
         let (l, kf) = (self.latent, self.flat);
         let d = &self.dense;
         let h = &self.acts.0[self.enc_out][..kf * batch];
@@ -405,7 +422,15 @@ impl<T: Scalar> Net<T> {
             let var = sg * sg;
             kl += m * m + var - (var + 1e-8).ln() - 1.0;
         }
-        // The decoder's dense layer: [K, B] = W_μ zᵀ + b_dec.
+        0.5 * kl / batch as f64
+    }
+
+    /// The decoder's dense layer from z: [K, B] = W_μ zᵀ + b_dec (+ W_dcᵀ cᵀ).
+    fn dense_decode(&mut self, w: &[&[T]], batch: usize) {
+        let (l, kf) = (self.latent, self.flat);
+        let d = &self.dense;
+        let lat = &self.lat;
+        let wm = Mat::row_major(w[d.w_mu], l);
         let dec = &mut self.acts.0[self.dec_in][..kf * batch];
         let zt = Mat::col_major(&lat.z[..batch * l], l);
         matmul(dec, (batch, 1), wm, zt, (kf, batch, l), false);
@@ -417,7 +442,6 @@ impl<T: Scalar> Net<T> {
             matmul(dec, (batch, 1), w_dc, ct, (kf, batch, n), true);
         }
         k::add_row_bias(dec, w[d.b_dec], batch);
-        0.5 * kl / batch as f64
     }
 
     /// Back-propagates `ga` through one chain of nodes, last node first, leaving the gradient

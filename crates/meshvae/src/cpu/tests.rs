@@ -269,6 +269,22 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
                 (got - want).abs() <= tol * want.abs(),
                 "{pool:?} {dtype:?} B={batch}: {got} vs {want}"
             );
+            // μ, σ, decoding and reconstruction: the applications' entry points.
+            let case = format!("{pool:?} {dtype:?} B={batch}");
+            let close = |got: &Tensor, want: &Tensor, what: &str| {
+                assert_eq!(got.dims(), want.dims(), "{case}: {what}");
+                let d = rel_diff(&values(got), &values(want), 1e-3);
+                assert!(d <= tol, "{case}: {what} differs by {d:e}");
+            };
+            let want = model.encode(&x, Mode::Eval).unwrap();
+            let (mu, sigma) = engine.encode_cond(&model, &x, None).unwrap();
+            close(&mu, &want.mu, "μ");
+            close(&sigma, &want.sigma, "σ");
+            let z = (&want.mu + 0.5).unwrap();
+            let decoded = engine.decode_cond(&model, &z, None).unwrap();
+            close(&decoded, &model.decode(&z, Mode::Eval).unwrap(), "decode");
+            let rec = engine.reconstruct_cond(&model, &x, None).unwrap();
+            close(&rec, &model.reconstruct(&x).unwrap(), "reconstruct");
         }
         for ((name, a), (_, b)) in before.iter().zip(&engine.gradients().unwrap()) {
             assert_eq!(values(a), values(b), "{pool:?}: gradient of {name} changed");
@@ -403,4 +419,42 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     // The model still decodes (the engine left its weights usable).
     engine.forward_backward(&model, &x, &eps, &w).unwrap();
     assert!(model.decode(&eps, Mode::Eval).is_ok());
+}
+
+#[test]
+fn conditional_inference_equals_candle_and_bad_latents_are_errors() {
+    let names = ["gallop", "trot"].map(String::from);
+    let config = ModelConfig {
+        channels: 5,
+        latent: 6,
+        ..Default::default()
+    }
+    .conditional_on(&names);
+    let (model, twin) = models(&config, DType::F64);
+    // Non-zero label weights (they start at zero) in the model the two paths share.
+    let _ = labels(&model, &twin, 1);
+    let mut engine = Engine::new(&model, 4).unwrap();
+    let (x, _) = inputs(&model, 3, 5);
+    let c = model.one_hot(&["trot", "gallop", "trot"]).unwrap();
+    let want = model.encode_cond(&x, Some(&c), Mode::Eval).unwrap();
+    let (mu, _) = engine.encode_cond(&model, &x, Some(&c)).unwrap();
+    assert!(rel_diff(&values(&mu), &values(&want.mu), 1e-3) < 1e-10);
+    let rec = engine.reconstruct_cond(&model, &x, Some(&c)).unwrap();
+    let want = model.reconstruct_cond(&x, Some(&c)).unwrap();
+    assert!(rel_diff(&values(&rec), &values(&want), 1e-3) < 1e-10);
+    // A blend of labels decodes as candle does too.
+    let blend = Tensor::from_vec(vec![4.0, 4.0, 8.0, 0.0, 0.0, 8.0], (3, 2), &Device::Cpu).unwrap();
+    let z = (&mu * 0.5).unwrap();
+    let got = engine.decode_cond(&model, &z, Some(&blend)).unwrap();
+    let want = model.decode_cond(&z, Some(&blend), Mode::Eval).unwrap();
+    assert!(rel_diff(&values(&got), &values(&want), 1e-3) < 1e-10);
+
+    let err = engine
+        .decode_cond(&model, &z, None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("label"), "{err}");
+    let wide = Tensor::zeros((5, 6), DType::F64, &Device::Cpu).unwrap();
+    let err = engine.decode_cond(&model, &wide, Some(&blend)).unwrap_err();
+    assert!(err.to_string().contains("[1 ..= 4, 6]"), "{err}");
 }
