@@ -72,7 +72,7 @@ impl BatchNorm {
         self.forward_then(x, mode, false)
     }
 
-    /// tanh of [`Self::forward`], fused on the CPU (the normalised values are never stored).
+    /// tanh of [`Self::forward`].
     pub fn forward_tanh(&self, x: &Tensor, mode: Mode) -> Result<Tensor> {
         self.forward_then(x, mode, true)
     }
@@ -95,64 +95,21 @@ impl BatchNorm {
             ));
         }
         let flat = x.reshape((batch * v, c))?;
-        let y = if crate::candle::ops::fusable(&flat) {
-            self.fused(&flat, mode, tanh)?
-        } else {
-            let y = self.unfused(&flat, mode)?;
-            if tanh { y.tanh()? } else { y }
-        };
+        let y = self.normalize(&flat, mode)?;
+        let y = if tanh { y.tanh()? } else { y };
         Ok(y.reshape((batch, v, c))?)
     }
 
-    /// The fused CPU op (see `ops.rs`) on x `[N, C]`.
-    fn fused(&self, flat: &Tensor, mode: Mode, tanh: bool) -> Result<Tensor> {
+    /// Normalises x `[N, C]` with candle ops.
+    fn normalize(&self, flat: &Tensor, mode: Mode) -> Result<Tensor> {
         let (mean, var) = match mode {
             Mode::Train => {
-                let (mean, var) = crate::candle::ops::channel_moments(flat)?;
-                let device = flat.device();
-                let c = mean.len();
-                let blend = |running: &Var, batch: &[f64]| -> Result<()> {
-                    let old: Vec<f64> = running.as_tensor().to_dtype(DType::F64)?.to_vec1()?;
-                    let next: Vec<f64> = old
-                        .iter()
-                        .zip(batch)
-                        .map(|(r, b)| Self::DECAY * r + (1.0 - Self::DECAY) * b)
-                        .collect();
-                    running.set(&Tensor::from_vec(next, c, device)?.to_dtype(running.dtype())?)?;
-                    Ok(())
-                };
-                blend(&self.running_mean, &mean)?;
-                blend(&self.running_var, &var)?;
-                (mean, var)
-            }
-            Mode::Eval => (
-                self.running_mean
-                    .as_tensor()
-                    .to_dtype(DType::F64)?
-                    .to_vec1()?,
-                self.running_var
-                    .as_tensor()
-                    .to_dtype(DType::F64)?
-                    .to_vec1()?,
-            ),
-        };
-        let inv_std = var.iter().map(|v| 1.0 / (v + Self::EPS).sqrt()).collect();
-        Ok(crate::candle::ops::batch_norm(
-            flat,
-            self.gamma.as_tensor(),
-            self.beta.as_tensor(),
-            (mean, inv_std),
-            mode == Mode::Train,
-            tanh,
-        )?)
-    }
-
-    /// The same with candle ops (any device; the reference of the fused op).
-    fn unfused(&self, flat: &Tensor, mode: Mode) -> Result<Tensor> {
-        let (mean, var) = match mode {
-            Mode::Train => {
-                let mean = flat.mean_keepdim(0)?;
-                let var = flat.broadcast_sub(&mean)?.sqr()?.mean_keepdim(0)?;
+                // Summed in f64: an f32 sum over B·V rows (135,000 at batch 16 on horse-gallop)
+                // loses about three digits, which 20 epochs turned into 5 % in the errors.
+                let wide = flat.to_dtype(DType::F64)?;
+                let mean = wide.mean_keepdim(0)?;
+                let var = wide.broadcast_sub(&mean)?.sqr()?.mean_keepdim(0)?;
+                let (mean, var) = (mean.to_dtype(flat.dtype())?, var.to_dtype(flat.dtype())?);
                 self.update_running(&mean, &var)?;
                 (mean, var)
             }
@@ -270,70 +227,6 @@ mod tests {
         assert!(diff.to_scalar::<f64>().unwrap() < 1e-12);
         let (rm2, _) = bn.running_stats();
         assert_eq!(rm.to_vec1::<f64>().unwrap(), rm2.to_vec1::<f64>().unwrap());
-    }
-
-    #[test]
-    fn fused_and_candle_op_paths_agree_with_gradients() {
-        let dev = Device::Cpu;
-        let v = |x: &[f64]| Var::from_slice(x, x.len(), &dev).unwrap();
-        // Two layers with the same state: one forced onto the candle-op path.
-        let make = || {
-            BatchNorm::new(
-                v(&[1.5, -0.5, 2.0]),
-                v(&[0.1, 0.2, -0.3]),
-                v(&[0.5, -1.0, 2.0]),
-                v(&[2.0, 0.5, 9.0]),
-            )
-            .unwrap()
-        };
-        let (a, b) = (make(), make());
-        // 7,000 × 3 rows: the fused op's reductions span several chunks.
-        let x = Var::from_tensor(&data(20, 350, 3, 5)).unwrap();
-        let r = data(20, 350, 3, 6);
-        for (mode, tanh) in [
-            (Mode::Train, false),
-            (Mode::Eval, false),
-            (Mode::Train, true),
-            (Mode::Eval, true),
-        ] {
-            let flat = x.as_tensor().reshape((7000, 3)).unwrap();
-            let ya = a.fused(&flat, mode, tanh).unwrap();
-            let yb = b.unfused(&flat, mode).unwrap();
-            let yb = if tanh { yb.tanh().unwrap() } else { yb };
-            let diff = (&ya - &yb).unwrap().abs().unwrap().max_all().unwrap();
-            assert!(
-                diff.to_scalar::<f64>().unwrap() < 1e-12,
-                "{mode:?} tanh {tanh}"
-            );
-            let r = r.reshape((7000, 3)).unwrap();
-            let ga = (ya * &r).unwrap().sum_all().unwrap().backward().unwrap();
-            let gb = (yb * &r).unwrap().sum_all().unwrap().backward().unwrap();
-            for (name, ta, tb) in [
-                ("x", x.as_tensor(), x.as_tensor()),
-                ("gamma", a.gamma.as_tensor(), b.gamma.as_tensor()),
-                ("beta", a.beta.as_tensor(), b.beta.as_tensor()),
-            ] {
-                let (da, db) = (ga.get(ta).unwrap(), gb.get(tb).unwrap());
-                let diff = (da - db).unwrap().abs().unwrap().max_all().unwrap();
-                let scale = db
-                    .abs()
-                    .unwrap()
-                    .max_all()
-                    .unwrap()
-                    .to_scalar::<f64>()
-                    .unwrap();
-                assert!(
-                    diff.to_scalar::<f64>().unwrap() < 1e-10 * scale.max(1.0),
-                    "{mode:?} d{name}"
-                );
-            }
-            let (ma, va) = a.running_stats();
-            let (mb, vb) = b.running_stats();
-            let d = (ma - mb).unwrap().abs().unwrap().max_all().unwrap();
-            assert!(d.to_scalar::<f64>().unwrap() < 1e-12);
-            let d = (va - vb).unwrap().abs().unwrap().max_all().unwrap();
-            assert!(d.to_scalar::<f64>().unwrap() < 1e-12);
-        }
     }
 
     #[test]

@@ -18,7 +18,6 @@ pub(crate) use cond::{LABEL_SCALE, pick as pick_labels, unknown_label};
 pub(crate) use file::{entry as tensor_entry, stamped_error};
 
 use crate::candle::batch_norm::Mode;
-use crate::candle::dense::{GradSink, Orientation, dense};
 use crate::error::{Result, VaeError};
 use crate::net::config::{FEATURE_CHANNELS, ModelConfig};
 use crate::net::params::ParamCount;
@@ -62,9 +61,6 @@ pub struct MeshVae {
     b_dec: Tensor,
     /// The label weights of a conditional model.
     label_weights: Option<cond::LabelWeights>,
-    /// Where the backward pass sums the dense weights' gradients (see `dense.rs`).
-    sink_mu: Arc<GradSink>,
-    sink_sigma: Arc<GradSink>,
 }
 
 impl MeshVae {
@@ -113,8 +109,6 @@ impl MeshVae {
             w_sigma: t(heads.w_sigma),
             b_sigma: t(heads.b_sigma),
             b_dec: t(heads.b_dec),
-            sink_mu: Arc::default(),
-            sink_sigma: Arc::default(),
             config: config.clone(),
             dtype,
             device: device.clone(),
@@ -239,10 +233,8 @@ impl MeshVae {
             .transpose(0, 1)?
             .contiguous()?
             .reshape((batch, self.flat_width()))?;
-        let mut mu = dense(&flat, &self.w_mu, Orientation::Plain, &self.sink_mu)?
-            .broadcast_add(&self.b_mu)?;
-        let mut s = dense(&flat, &self.w_sigma, Orientation::Plain, &self.sink_sigma)?
-            .broadcast_add(&self.b_sigma)?;
+        let mut mu = flat.matmul(&self.w_mu)?.broadcast_add(&self.b_mu)?;
+        let mut s = flat.matmul(&self.w_sigma)?.broadcast_add(&self.b_sigma)?;
         if let Some((c, w)) = label {
             mu = (mu + c.matmul(&w.mu)?)?;
             s = (s + c.matmul(&w.sigma)?)?;
@@ -312,8 +304,7 @@ impl MeshVae {
     /// The decoder's dense layer: zW_μᵀ + b_dec (+ c·W_dc for a conditional model).
     pub(crate) fn decoder_fc_cond(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
         let label = self.check_labels("MeshVae::decode", c, z.dim(0)?)?;
-        let h = dense(z, &self.w_mu, Orientation::Transposed, &self.sink_mu)?
-            .broadcast_add(&self.b_dec)?;
+        let h = z.matmul(&self.w_mu.t()?)?.broadcast_add(&self.b_dec)?;
         Ok(match label {
             Some((c, w)) => (h + c.matmul(&w.dec)?)?,
             None => h,
@@ -355,28 +346,9 @@ impl MeshVae {
         }
     }
 
-    /// Gradients of `loss` (a scalar computed by this model) for every variable. Use this rather
-    /// than `loss.backward()`: the dense weights' gradients bypass candle's store to save memory
-    /// (see `dense.rs`) and are put back here.
+    /// Gradients of `loss` (a scalar computed by this model) for every variable.
     pub fn backward(&self, loss: &Tensor) -> Result<GradStore> {
-        // Contributions left by a `backward()` called directly are stale: drop them.
-        self.sink_mu.take();
-        self.sink_sigma.take();
-        let mut grads = loss.backward()?;
-        for (w, sink) in [
-            (&self.w_mu, &self.sink_mu),
-            (&self.w_sigma, &self.sink_sigma),
-        ] {
-            if let Some(g) = sink.take() {
-                // Terms outside the dense layers (the L2 term of `loss`) went to the store.
-                let g = match grads.remove(w) {
-                    Some(other) => (other + g)?,
-                    None => g,
-                };
-                grads.insert(w, g);
-            }
-        }
-        Ok(grads)
+        Ok(loss.backward()?)
     }
 
     /// One stage on h `[V, B, C]`.

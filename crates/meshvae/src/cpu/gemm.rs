@@ -126,7 +126,7 @@ fn check_or_finish<T: Scalar>(
         if !accumulate {
             for r in 0..m {
                 for c in 0..n {
-                    dst[r * dst_rs + c * dst_cs] = <T as crate::candle::ops::Real>::of(0.0);
+                    dst[r * dst_rs + c * dst_cs] = <T as crate::numerics::real::Real>::of(0.0);
                 }
             }
         }
@@ -145,7 +145,7 @@ fn split_k<T: Scalar>(
     (m, n, k): (usize, usize, usize),
     accumulate: bool,
 ) {
-    let zero = <T as crate::candle::ops::Real>::of(0.0);
+    let zero = <T as crate::numerics::real::Real>::of(0.0);
     let mut partials = vec![zero; k.div_ceil(K_SLICE) * m * n];
     partials
         .par_chunks_mut(m * n)
@@ -191,7 +191,7 @@ unsafe fn product<T: Scalar>(
     accumulate: bool,
     parallel: bool,
 ) {
-    let one = <T as crate::candle::ops::Real>::of(1.0);
+    let one = <T as crate::numerics::real::Real>::of(1.0);
     let threads = if parallel {
         rayon::current_num_threads()
     } else {

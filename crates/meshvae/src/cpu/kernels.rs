@@ -162,7 +162,7 @@ pub(super) fn bn_forward<T: Scalar>(
                             let pairs = orun.iter_mut().zip(xrun);
                             if tanh {
                                 pairs.for_each(|(o, &x)| {
-                                    *o = crate::candle::ops::Real::tanh(x * a + d)
+                                    *o = crate::numerics::real::Real::tanh(x * a + d)
                                 });
                             } else {
                                 pairs.for_each(|(o, &x)| *o = x * a + d);
@@ -278,7 +278,7 @@ pub(super) fn tanh_inplace<T: Scalar>(x: &mut [T]) {
     x.par_chunks_mut(1 << 14).for_each(|c| {
         wide(|| {
             c.iter_mut()
-                .for_each(|v| *v = crate::candle::ops::Real::tanh(*v))
+                .for_each(|v| *v = crate::numerics::real::Real::tanh(*v))
         })
     });
 }
@@ -384,7 +384,7 @@ mod tests {
         x[5] = f32::NAN;
         x[6] = f32::INFINITY;
         x[7] = f32::NEG_INFINITY;
-        let tanh = |v: f32| crate::candle::ops::Real::tanh(v);
+        let tanh = |v: f32| crate::numerics::real::Real::tanh(v);
         let mut t = x.clone();
         tanh_inplace(&mut t);
         let same = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(p, q)| p.to_bits() == q.to_bits());

@@ -44,7 +44,7 @@ use net::Net;
 
 /// The float types the engine runs on (f32, f64).
 pub(crate) trait Scalar:
-    crate::candle::ops::Real + spectral_conv::Float + candle_core::WithDType
+    crate::numerics::real::Real + spectral_conv::Float + candle_core::WithDType
 {
 }
 impl Scalar for f32 {}
@@ -53,13 +53,13 @@ impl Scalar for f64 {}
 /// The value in f64 (the two float traits both name this method).
 #[inline(always)]
 pub(crate) fn f64_of<T: Scalar>(x: T) -> f64 {
-    crate::candle::ops::Real::to_f64(x)
+    crate::numerics::real::Real::to_f64(x)
 }
 
 /// An f64 in the float type.
 #[inline(always)]
 pub(crate) fn of<T: Scalar>(x: f64) -> T {
-    <T as crate::candle::ops::Real>::of(x)
+    <T as crate::numerics::real::Real>::of(x)
 }
 
 /// The loss terms of one engine step, weighted as in [`crate::Loss`] (the L2 term comes from

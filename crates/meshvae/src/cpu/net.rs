@@ -413,7 +413,7 @@ impl<T: Scalar> Net<T> {
             let mu = lat.mu[i] + w[d.b_mu][j];
             let s = f64_of(lat.sig[i] + w[d.b_sigma][j]);
             let sig: T = of(1.0 / (1.0 + (-s).exp()));
-            let sigma = crate::candle::ops::Real::sqrt(sig * two);
+            let sigma = crate::numerics::real::Real::sqrt(sig * two);
             lat.mu[i] = mu;
             lat.sig[i] = sig;
             lat.sigma[i] = sigma;

@@ -1,7 +1,9 @@
 //! Numerics that know nothing of meshes or of the network: the seeded random stream every draw
 //! of a run comes from ([`rng::Rng`]), principal components and the symmetric eigensolver
-//! ([`pca`](pca::pca)), and t-SNE ([`tsne`](tsne::tsne)) for the embeddings.
+//! ([`pca`](pca::pca)), t-SNE ([`tsne`](tsne::tsne)) for the embeddings, and the float types
+//! the CPU kernels run on ([`real::Real`]).
 
 pub(crate) mod pca;
+pub(crate) mod real;
 pub(crate) mod rng;
 pub(crate) mod tsne;

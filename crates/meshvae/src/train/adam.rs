@@ -10,8 +10,8 @@ mod kernels;
 
 pub(crate) use kernels::GradSource;
 
-use crate::candle::ops::Real;
 use crate::error::{Result, VaeError};
+use crate::numerics::real::Real;
 use candle_core::backprop::GradStore;
 use candle_core::{DType, Tensor, Var};
 use kernels::{FusedUpdate, update_slot};
@@ -178,7 +178,7 @@ impl Adam {
             let Some(g) = grads.get(&slot.var) else {
                 continue;
             };
-            if crate::candle::ops::fusable(g) && g.dtype() == slot.var.dtype() {
+            if crate::numerics::real::fusable(g) && g.dtype() == slot.var.dtype() {
                 // The CPU path: the engine's one-pass update (L2 gradient added inside).
                 let g = g.contiguous()?;
                 match g.dtype() {

@@ -63,14 +63,22 @@ pub struct Loss {
     pub l2: f64,
 }
 
+/// ½ Σ w², a scalar tensor of w's dtype (summed in f64).
+fn half_sum_sq(w: &Tensor) -> Result<Tensor> {
+    let sum = w.sqr()?.to_dtype(DType::F64)?.sum_all()?;
+    Ok((sum * 0.5)?.to_dtype(w.dtype())?)
+}
+
 fn scalar(t: &Tensor) -> Result<f64> {
     Ok(t.to_dtype(DType::F64)?.to_scalar::<f64>()?)
 }
 
-/// mean_b Σ_{v,c} (x − x̂)², a scalar tensor.
+/// mean_b Σ_{v,c} (x − x̂)², a scalar tensor of x's dtype (summed in f64: an f32 sum over a
+/// batch's million values loses digits).
 fn mean_sse(x: &Tensor, x_hat: &Tensor) -> Result<Tensor> {
     let batch = x.dim(0)? as f64;
-    Ok((crate::candle::sse::sum_sq_diff(x, x_hat)? / batch)?)
+    let sum = (x - x_hat)?.sqr()?.to_dtype(DType::F64)?.sum_all()?;
+    Ok((sum / batch)?.to_dtype(x.dtype())?)
 }
 
 /// mean_b ½ Σ_j (μ² + σ² − log(10⁻⁸ + σ²) − 1), a scalar tensor.
@@ -86,7 +94,7 @@ impl MeshVae {
     pub fn l2_term(&self) -> Result<Tensor> {
         let mut sum = Tensor::zeros((), self.dtype(), self.device())?;
         for (_, v) in self.trainable_vars() {
-            sum = (sum + crate::candle::ops::half_sum_sq(v.as_tensor())?)?;
+            sum = (sum + half_sum_sq(v.as_tensor())?)?;
         }
         Ok(sum)
     }
@@ -153,7 +161,7 @@ impl MeshVae {
         } else {
             let mut sum = 0.0;
             for (_, v) in self.trainable_vars() {
-                sum += scalar(&crate::candle::ops::half_sum_sq(&v.as_tensor().detach())?)?;
+                sum += scalar(&half_sum_sq(&v.as_tensor().detach())?)?;
             }
             sum * weights.l2
         };

@@ -87,7 +87,7 @@ impl ConvBlock {
         Ok(match (&self.bn, self.spec.tanh) {
             (Some(bn), true) => bn.forward_tanh(&y, mode)?,
             (Some(bn), false) => bn.forward(&y, mode)?,
-            (None, true) => crate::candle::ops::tanh(&y)?,
+            (None, true) => y.tanh()?,
             (None, false) => y,
         })
     }

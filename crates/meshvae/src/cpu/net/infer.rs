@@ -24,15 +24,10 @@ impl<T: Scalar> Net<T> {
     ) -> Result<f64> {
         let batch = self.infer(model, x, c, Pass::Whole)?;
         let n = self.v0 * FEATURE_CHANNELS * batch;
+        // The training loss's kernel; its gradient output goes to the backward work buffer,
+        // which a pending step no longer needs.
         let (x_hat, x) = (&self.acts.0[self.x_hat][..n], &self.acts.0[self.x_buf][..n]);
-        let sse: f64 = x_hat
-            .iter()
-            .zip(x)
-            .map(|(&h, &x)| {
-                let d = f64_of(h - x);
-                d * d
-            })
-            .sum();
+        let sse = k::sse_grad(x_hat, x, &mut self.work[..n], 0.0);
         // Rounded to the model's precision, as candle's path reports it.
         Ok(weights.rec * f64_of::<T>(crate::cpu::of(sse / batch as f64)))
     }

@@ -3,8 +3,8 @@
 //! gradients alike.
 
 use super::Slot;
-use crate::candle::ops::{CHUNK, Real, span, span_mut};
 use crate::error::{Result, VaeError};
+use crate::numerics::real::{CHUNK, Real, span, span_mut};
 use candle_core::{CpuStorage, InplaceOp1, Layout, Tensor, bail};
 use rayon::prelude::*;
 use std::cell::RefCell;
