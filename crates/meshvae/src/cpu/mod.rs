@@ -24,7 +24,7 @@
 //! This folder holds the engine (here), its network of layers over reused buffers (`net.rs`;
 //! `net/`: built from the model's network plan (`net::plan::NetPlan`: the layer list and
 //! variable ids candle's model is built from too), per-layer forward and backward, convolution weights,
-//! inference), its element-wise kernels (`kernels.rs`), the matrix products (`gemm.rs`) and
+//! the latent heads, inference), its element-wise kernels (`kernels.rs`), the matrix products (`gemm.rs`) and
 //! [`wide`](wide::wide) (AVX2 + FMA loops, also used by Adam's update). It imports `train/` only
 //! for the [`Adam`] it steps and the [`LossWeights`] it reads.
 

@@ -1,6 +1,5 @@
 //! The engine's network: its layer list, buffers, forward and backward passes (see `mod.rs`).
 
-use super::gemm::{Mat, matmul, matmul_serial};
 use super::kernels as k;
 use super::{Scalar, StepLoss, f64_of, of};
 use crate::candle::batch_norm::BatchNorm;
@@ -15,6 +14,7 @@ use spectral_conv::{ChebKernel, MaxKernel, SparseKernel};
 mod build;
 mod conv_weight;
 mod infer;
+mod latent;
 mod node;
 
 use conv_weight::ConvWeight;
@@ -363,87 +363,6 @@ impl<T: Scalar> Net<T> {
         })
     }
 
-    /// μ, σ, z and the decoder's dense layer; returns the batch mean of the KL divergence.
-    fn latent_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
-        let kl = self.heads_forward(w, batch);
-        self.dense_decode(w, batch);
-        kl
-    }
-
-    /// μ, σ and z = μ + σ ε from the encoder's output; returns the batch mean of the KL
-    /// divergence.
-    fn heads_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
-        let (l, kf) = (self.latent, self.flat);
-        let d = &self.dense;
-        let h = &self.acts.0[self.enc_out][..kf * batch];
-        let lat = &mut self.lat;
-        let h_rows = Mat::col_major(h, batch);
-        let (wm, ws) = (
-            Mat::row_major(w[d.w_mu], l),
-            Mat::row_major(w[d.w_sigma], l),
-        );
-        matmul(&mut lat.mu, (l, 1), h_rows, wm, (batch, l, kf), false);
-        // The pre-activation of σ goes into `sig` first.
-        matmul(&mut lat.sig, (l, 1), h_rows, ws, (batch, l, kf), false);
-        // A conditional model adds c·W_c to both pre-activations.
-        if let Some(labels) = d.labels {
-            let c = Mat::row_major(&self.cond[..batch * labels.count], labels.count);
-            let dims = (batch, l, labels.count);
-            matmul(
-                &mut lat.mu,
-                (l, 1),
-                c,
-                Mat::row_major(w[labels.mu], l),
-                dims,
-                true,
-            );
-            matmul(
-                &mut lat.sig,
-                (l, 1),
-                c,
-                Mat::row_major(w[labels.sigma], l),
-                dims,
-                true,
-            );
-        }
-        let mut kl = 0.0;
-        let two: T = of(2.0);
-        for i in 0..batch * l {
-            let j = i % l;
-            let mu = lat.mu[i] + w[d.b_mu][j];
-            let s = f64_of(lat.sig[i] + w[d.b_sigma][j]);
-            let sig: T = of(1.0 / (1.0 + (-s).exp()));
-            let sigma = crate::numerics::real::Real::sqrt(sig * two);
-            lat.mu[i] = mu;
-            lat.sig[i] = sig;
-            lat.sigma[i] = sigma;
-            lat.z[i] = mu + sigma * lat.eps[i];
-            let (m, sg) = (f64_of(mu), f64_of(sigma));
-            let var = sg * sg;
-            kl += m * m + var - (var + 1e-8).ln() - 1.0;
-        }
-        0.5 * kl / batch as f64
-    }
-
-    /// The decoder's dense layer from z: [K, B] = W_μ zᵀ + b_dec (+ W_dcᵀ cᵀ).
-    fn dense_decode(&mut self, w: &[&[T]], batch: usize) {
-        let (l, kf) = (self.latent, self.flat);
-        let d = &self.dense;
-        let lat = &self.lat;
-        let wm = Mat::row_major(w[d.w_mu], l);
-        let dec = &mut self.acts.0[self.dec_in][..kf * batch];
-        let zt = Mat::col_major(&lat.z[..batch * l], l);
-        matmul(dec, (batch, 1), wm, zt, (kf, batch, l), false);
-        if let Some(labels) = d.labels {
-            // + W_dcᵀ cᵀ: [K, L] · [L, B].
-            let n = labels.count;
-            let w_dc = Mat::col_major(w[labels.dec], kf);
-            let ct = Mat::col_major(&self.cond[..batch * n], n);
-            matmul(dec, (batch, 1), w_dc, ct, (kf, batch, n), true);
-        }
-        k::add_row_bias(dec, w[d.b_dec], batch);
-    }
-
     /// Back-propagates `ga` through one chain of nodes, last node first, leaving the gradient
     /// with respect to the chain's input in `ga`.
     fn backward_chain(&mut self, chain: Chain, w: &[&[T]], batch: usize) -> Result<()> {
@@ -474,114 +393,6 @@ impl<T: Scalar> Net<T> {
         std::mem::swap(&mut self.ga, &mut self.gb);
         self.backward_chain(Chain::Encoder, w, batch)?;
         Ok(())
-    }
-
-    /// From ∂L/∂(dense output) in `ga` to the dense biases' gradients and ∂L/∂h in `gb`. The
-    /// dense weights' gradients are left to [`Self::dense_grad_rows`]: what they need (h, the
-    /// decoder's output gradient, z, ∂L/∂μ, ∂L/∂s) stays in the buffers.
-    fn latent_backward(&mut self, w: &[&[T]], batch: usize, weights: &LossWeights) {
-        let (l, kf) = (self.latent, self.flat);
-        let d = &self.dense;
-        let g = &self.ga[..kf * batch];
-        k::row_sums(g, batch, &mut self.grads[d.b_dec]);
-        self.dec_grad[..kf * batch].copy_from_slice(g);
-        let lat = &mut self.lat;
-        let (wm, ws) = (
-            Mat::row_major(w[d.w_mu], l),
-            Mat::row_major(w[d.w_sigma], l),
-        );
-        // dz = g W_μ (the tied use).
-        matmul(
-            &mut lat.dz,
-            (l, 1),
-            Mat::col_major(g, batch),
-            wm,
-            (batch, l, kf),
-            false,
-        );
-        // Through z = μ + σ ε, the KL term and σ = √(2·sigmoid(s)).
-        let c = weights.kl / batch as f64;
-        for i in 0..batch * l {
-            let (mu, sigma, sig) = (f64_of(lat.mu[i]), f64_of(lat.sigma[i]), f64_of(lat.sig[i]));
-            let dz = f64_of(lat.dz[i]);
-            let dmu = dz + c * mu;
-            let dsigma = dz * f64_of(lat.eps[i]) + c * (sigma - sigma / (sigma * sigma + 1e-8));
-            lat.dmu[i] = of(dmu);
-            lat.ds[i] = of(dsigma / sigma * sig * (1.0 - sig));
-        }
-        for (bias, src) in [(d.b_mu, &lat.dmu), (d.b_sigma, &lat.ds)] {
-            for j in 0..l {
-                let s: f64 = (0..batch).map(|b| f64_of(src[b * l + j])).sum();
-                self.grads[bias][j] = of(s);
-            }
-        }
-        let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
-        if let Some(labels) = d.labels {
-            // dW_c = cᵀ (∂L/∂μ), cᵀ (∂L/∂s); dW_dc = cᵀ gᵀ.
-            let n = labels.count;
-            let ct = Mat::col_major(&self.cond[..batch * n], n);
-            let dims = (n, l, batch);
-            let grads = &mut self.grads;
-            matmul(
-                &mut grads[labels.mu],
-                (l, 1),
-                ct,
-                Mat::row_major(dmu, l),
-                dims,
-                false,
-            );
-            matmul(
-                &mut grads[labels.sigma],
-                (l, 1),
-                ct,
-                Mat::row_major(ds, l),
-                dims,
-                false,
-            );
-            let gt = Mat::col_major(g, batch);
-            matmul(
-                &mut grads[labels.dec],
-                (kf, 1),
-                ct,
-                gt,
-                (n, kf, batch),
-                false,
-            );
-        }
-        let gb = &mut self.gb[..kf * batch];
-        let (dmu_cols, ds_cols) = (Mat::col_major(dmu, l), Mat::col_major(ds, l));
-        matmul(gb, (batch, 1), wm, dmu_cols, (kf, batch, l), false);
-        matmul(gb, (batch, 1), ws, ds_cols, (kf, batch, l), true);
-    }
-
-    /// Rows `first..` of the last step's gradient of the dense weight `var` (`w_mu` or
-    /// `w_sigma`, row-major `[V_L·C, latent]`) into `out` (whole rows), on this thread:
-    /// dW_μ = g zᵀ + h (∂L/∂μ)ᵀ (the decoder's tied use, then the encoder's), dW_σ = h (∂L/∂s)ᵀ.
-    fn dense_grad_rows(&self, var: usize, first: usize, out: &mut [T]) {
-        let (l, batch) = (self.latent, self.batch);
-        let rows = out.len() / l;
-        let lat = &self.lat;
-        let span = first * batch..(first + rows) * batch;
-        fn block<T>(buf: &[T], span: std::ops::Range<usize>, batch: usize) -> Mat<'_, T> {
-            Mat::row_major(&buf[span], batch)
-        }
-        let h = block(&self.acts.0[self.enc_out], span.clone(), batch);
-        let dims = (rows, l, batch);
-        let (dmu, ds) = (&lat.dmu[..batch * l], &lat.ds[..batch * l]);
-        if var == self.dense.w_mu {
-            let z = Mat::row_major(&lat.z[..batch * l], l);
-            matmul_serial(
-                out,
-                (l, 1),
-                block(&self.dec_grad, span, batch),
-                z,
-                dims,
-                false,
-            );
-            matmul_serial(out, (l, 1), h, Mat::row_major(dmu, l), dims, true);
-        } else {
-            matmul_serial(out, (l, 1), h, Mat::row_major(ds, l), dims, false);
-        }
     }
 
     /// r ← 0.9·r + 0.1·batch for every batch norm (as `BatchNorm` in train mode).
