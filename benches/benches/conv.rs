@@ -408,8 +408,12 @@ fn buffer_level_ablation(group: &mut Group<'_>, ablation: &Ablation, xv: &[f32])
     let (mut y, mut arg, mut dx) = (vec![0.0f32; m * n], vec![0u32; m * n], vec![0.0f32; v * n]);
     group.bench_function("graph pool fwd+bwd, buffer-level", |b| {
         b.iter(|| {
-            max.forward_into(xv, &mut y, &mut arg, n).expect("pool");
-            max.backward_into(&arg, &y, &mut dx, n).expect("adjoint");
+            max.kernel()
+                .forward_into(xv, &mut y, &mut arg, n)
+                .expect("pool");
+            max.kernel()
+                .backward_into(&arg, &y, &mut dx, n)
+                .expect("adjoint");
             black_box(dx[0])
         })
     });

@@ -13,7 +13,6 @@ use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real, spmm_axpby};
 use crate::layout::{Blocks, Io};
 use crate::max_kernel::{MaxMode, max_pool, max_unpool};
-use crate::pool::MaxPool;
 use crate::spmm::SparseOp;
 use sparse_csr::CsrMatrix;
 use std::sync::Arc;
@@ -350,7 +349,7 @@ fn split_terms<T>(terms: &mut [T], k: usize, size: usize) -> Vec<&mut [T]> {
 }
 
 /// Max pooling over the rows of a pooling matrix's pattern (each row's columns are one
-/// cluster or neighbourhood), on caller-owned `[V, n]` slices; what [`MaxPool`] runs on the CPU.
+/// cluster or neighbourhood), on caller-owned `[V, n]` slices; what [`crate::MaxPool`] runs on the CPU.
 #[derive(Debug, Clone)]
 pub struct MaxKernel {
     pattern: Arc<Csr>,
@@ -395,7 +394,7 @@ impl MaxKernel {
     }
 
     /// Max pooling of x `[fine, n]` into y `[coarse, n]` (every one of a vertex's n values
-    /// pooled on its own, as [`MaxPool::forward_vertex_major`]); `arg` (`[coarse, n]`)
+    /// pooled on its own, as [`crate::MaxPool::forward_vertex_major`]); `arg` (`[coarse, n]`)
     /// receives the selected fine vertex (`u32::MAX` for an empty cluster).
     pub fn forward_into<T: Float>(
         &self,
@@ -430,30 +429,6 @@ impl MaxKernel {
         check_len(OP, "dx", dx.len(), p.cols() * n)?;
         max_unpool(&self.pattern_t, arg, g, dx, n);
         Ok(())
-    }
-}
-
-impl MaxPool {
-    /// [`MaxKernel::forward_into`] with this layer's kernel.
-    pub fn forward_into<T: Float>(
-        &self,
-        x: &[T],
-        y: &mut [T],
-        arg: &mut [u32],
-        n: usize,
-    ) -> Result<()> {
-        self.kernel().forward_into(x, y, arg, n)
-    }
-
-    /// [`MaxKernel::backward_into`] with this layer's kernel.
-    pub fn backward_into<T: Float>(
-        &self,
-        arg: &[u32],
-        g: &[T],
-        dx: &mut [T],
-        n: usize,
-    ) -> Result<()> {
-        self.kernel().backward_into(arg, g, dx, n)
     }
 }
 

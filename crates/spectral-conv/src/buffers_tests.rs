@@ -2,6 +2,7 @@
 //! and renumbered operators.
 
 use super::*;
+use crate::MaxPool;
 use crate::test_util::{random_matrix, random_vec};
 use candle_core::{Device, Tensor};
 
@@ -231,7 +232,9 @@ fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
 
     let pool = MaxPool::new(&m, &Device::Cpu).unwrap();
     let (mut py, mut arg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
-    pool.forward_into(&x, &mut py, &mut arg, n).unwrap();
+    pool.kernel()
+        .forward_into(&x, &mut py, &mut arg, n)
+        .unwrap();
     let xt = Tensor::from_vec(x.clone(), (70, 1, n), &Device::Cpu).unwrap();
     let want: Vec<f64> = pool
         .forward_vertex_major(&xt)
@@ -242,7 +245,7 @@ fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
         .unwrap();
     assert_eq!(py, want);
     let mut dx = vec![9.0; 70 * n];
-    pool.backward_into(&arg, &g, &mut dx, n).unwrap();
+    pool.kernel().backward_into(&arg, &g, &mut dx, n).unwrap();
     let lhs: f64 = g.iter().zip(&py).map(|(a, b)| a * b).sum();
     let rhs: f64 = dx.iter().zip(&x).map(|(a, b)| a * b).sum();
     assert!((lhs - rhs).abs() < 1e-10 * lhs.abs().max(1.0));
@@ -269,7 +272,7 @@ fn graph_max_pool_buffers_match_the_candle_op_and_its_gradient() {
     let x = random_vec(70 * n, 12);
     let g = random_vec(30 * n, 13);
     let (mut y, mut arg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
-    pool.forward_into(&x, &mut y, &mut arg, n).unwrap();
+    pool.kernel().forward_into(&x, &mut y, &mut arg, n).unwrap();
     let xt = candle_core::Var::from_vec(x.clone(), (70, 1, n), &Device::Cpu).unwrap();
     let yt = pool.forward_vertex_major(xt.as_tensor()).unwrap();
     let want: Vec<f64> = yt.flatten_all().unwrap().to_vec1().unwrap();
@@ -284,7 +287,7 @@ fn graph_max_pool_buffers_match_the_candle_op_and_its_gradient() {
         .to_vec1()
         .unwrap();
     let mut dx = vec![9.0; 70 * n];
-    pool.backward_into(&arg, &g, &mut dx, n).unwrap();
+    pool.kernel().backward_into(&arg, &g, &mut dx, n).unwrap();
     for (p, q) in dx.iter().zip(&want_dx) {
         assert!((p - q).abs() < 1e-14, "{p} vs {q}");
     }
@@ -296,7 +299,11 @@ fn graph_max_pool_buffers_match_the_candle_op_and_its_gradient() {
         }
     }
     assert!(times.iter().any(|&t| t > 1));
-    assert!(pool.backward_into(&arg, &g[1..], &mut dx, n).is_err());
+    assert!(
+        pool.kernel()
+            .backward_into(&arg, &g[1..], &mut dx, n)
+            .is_err()
+    );
 }
 
 #[test]
@@ -309,7 +316,7 @@ fn max_pool_blocks_match_a_plain_loop_and_unpool_is_the_same_on_any_thread_count
     for mode in [crate::MaxMode::Plain, crate::MaxMode::SignedMagnitude] {
         let pool = MaxPool::with_mode(&m, mode, &Device::Cpu).unwrap();
         let (mut y, mut arg) = (vec![0.0; 50 * n], vec![0u32; 50 * n]);
-        pool.forward_into(&x, &mut y, &mut arg, n).unwrap();
+        pool.kernel().forward_into(&x, &mut y, &mut arg, n).unwrap();
         for r in 0..50 {
             for k in 0..n {
                 let (mut best, mut at) = (0.0f64, u32::MAX);
@@ -334,7 +341,7 @@ fn max_pool_blocks_match_a_plain_loop_and_unpool_is_the_same_on_any_thread_count
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| pool.backward_into(&arg, &g, &mut dx, n).unwrap());
+                .install(|| pool.kernel().backward_into(&arg, &g, &mut dx, n).unwrap());
             dx
         };
         let one = run(1);
@@ -387,20 +394,23 @@ fn graph_pool_timing_probe() {
     };
     println!("{v} -> {m} vertices, {} memberships", members.nnz());
     time("graph pool forward_into", &mut || {
-        pool.forward_into(&x, &mut y, &mut arg, n).unwrap()
+        pool.kernel().forward_into(&x, &mut y, &mut arg, n).unwrap()
     });
     time("signed max pool forward_into", &mut || {
-        signed.forward_into(&x, &mut y, &mut arg, n).unwrap()
+        signed
+            .kernel()
+            .forward_into(&x, &mut y, &mut arg, n)
+            .unwrap()
     });
     time("graph pool backward_into", &mut || {
-        pool.backward_into(&arg, &y, &mut dx, n).unwrap()
+        pool.kernel().backward_into(&arg, &y, &mut dx, n).unwrap()
     });
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .unwrap();
     time("graph pool backward_into, 1 thread", &mut || {
-        one.install(|| pool.backward_into(&arg, &y, &mut dx, n).unwrap())
+        one.install(|| pool.kernel().backward_into(&arg, &y, &mut dx, n).unwrap())
     });
     let mean = SparseKernel::new(&SparseOp::new(&members, &Device::Cpu).unwrap());
     time("sparse product, same pattern", &mut || {
