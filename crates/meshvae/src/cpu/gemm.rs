@@ -7,7 +7,7 @@
 //! (14.5 against 11.2 ms). Here the k axis is cut into fixed slices whose products are
 //! summed in slice order (5.7–5.9 ms), the same sums whatever the thread count.
 
-use super::Scalar;
+use super::Real;
 use rayon::prelude::*;
 
 /// The k slice of a split product (fixed, so that the result does not depend on the threads).
@@ -60,7 +60,7 @@ fn extent(rows: usize, cols: usize, rs: usize, cs: usize) -> usize {
 ///
 /// Panics (an internal error, not an input one) if a view does not fit its slice: the engine
 /// sizes every buffer from the model when it is built.
-pub(super) fn matmul<T: Scalar>(
+pub(super) fn matmul<T: Real>(
     dst: &mut [T],
     dst_strides: (usize, usize),
     lhs: Mat<'_, T>,
@@ -83,7 +83,7 @@ pub(super) fn matmul<T: Scalar>(
 
 /// [`matmul`] on the calling thread only: for blocks of a product that the caller already
 /// runs in parallel. The same sums as [`matmul`] where that does not split k.
-pub(super) fn matmul_serial<T: Scalar>(
+pub(super) fn matmul_serial<T: Real>(
     dst: &mut [T],
     dst_strides: (usize, usize),
     lhs: Mat<'_, T>,
@@ -99,7 +99,7 @@ pub(super) fn matmul_serial<T: Scalar>(
 
 /// Checks that every view fits its slice (panics otherwise) and finishes the empty products;
 /// returns whether a product is left to compute.
-fn check_or_finish<T: Scalar>(
+fn check_or_finish<T: Real>(
     dst: &mut [T],
     (dst_rs, dst_cs): (usize, usize),
     lhs: Mat<'_, T>,
@@ -137,7 +137,7 @@ fn check_or_finish<T: Scalar>(
 
 /// [`matmul`] for few outputs and a long k: each slice of k into its own `m × n` partial
 /// product, in parallel, then dst = [dst +] Σ partials in slice order.
-fn split_k<T: Scalar>(
+fn split_k<T: Real>(
     dst: &mut [T],
     (dst_rs, dst_cs): (usize, usize),
     lhs: Mat<'_, T>,
@@ -182,7 +182,7 @@ fn split_k<T: Scalar>(
 ///
 /// # Safety
 /// The m × k, k × n and m × n views must lie inside `lhs.data`, `rhs.data` and `dst`.
-unsafe fn product<T: Scalar>(
+unsafe fn product<T: Real>(
     dst: &mut [T],
     (dst_rs, dst_cs): (usize, usize),
     lhs: Mat<'_, T>,

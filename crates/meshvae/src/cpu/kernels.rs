@@ -3,7 +3,7 @@
 //! Reductions sum fixed chunks of vertices in f64 and add the partial sums in chunk order, so
 //! results do not depend on the thread count.
 
-use super::{Scalar, f64_of, of};
+use super::{Real, f64_of, of};
 use crate::cpu::wide::wide;
 use rayon::prelude::*;
 
@@ -11,7 +11,7 @@ use rayon::prelude::*;
 const CHUNK_V: usize = 256;
 
 /// x `[B, V, C]` → out `[V, C, B]`.
-pub(super) fn to_vcb<T: Scalar>(
+pub(super) fn to_vcb<T: Real>(
     x: &[T],
     out: &mut [T],
     (batch, v, c): (usize, usize, usize),
@@ -39,7 +39,7 @@ pub(super) fn to_vcb<T: Scalar>(
 
 /// x `[V, C, B]` → out `[B, V, C]`, undoing [`to_vcb`]'s vertex order (`order[p]`: the
 /// template vertex at position p).
-pub(super) fn from_vcb<T: Scalar>(
+pub(super) fn from_vcb<T: Real>(
     x: &[T],
     out: &mut [T],
     (batch, v, c): (usize, usize, usize),
@@ -61,7 +61,7 @@ type Lanes = [f64; 8];
 
 /// Σ f(run[i]) in eight lanes, in a local array (so that the lanes stay in registers).
 #[inline(always)]
-fn run_lanes<T: Scalar>(run: &[T], f: impl Fn(f64) -> f64) -> Lanes {
+fn run_lanes<T: Real>(run: &[T], f: impl Fn(f64) -> f64) -> Lanes {
     let mut acc = [0.0; 8];
     let blocks = run.chunks_exact(8);
     let tail = blocks.remainder();
@@ -78,7 +78,7 @@ fn run_lanes<T: Scalar>(run: &[T], f: impl Fn(f64) -> f64) -> Lanes {
 
 /// Per-channel sums over a `[V, C, B]` array of the values, or (`shift` given) of their
 /// squared distances to the channel's shift; chunk partials added in order.
-fn channel_sums<T: Scalar>(x: &[T], (c, batch): (usize, usize), shift: Option<&[f64]>) -> Vec<f64> {
+fn channel_sums<T: Real>(x: &[T], (c, batch): (usize, usize), shift: Option<&[f64]>) -> Vec<f64> {
     let n = c * batch;
     let partial: Vec<Vec<Lanes>> = x
         .par_chunks(CHUNK_V * n)
@@ -115,7 +115,7 @@ fn channel_sums<T: Scalar>(x: &[T], (c, batch): (usize, usize), shift: Option<&[
 }
 
 /// Per-channel mean and biased variance over vertices and batch (two passes, f64).
-pub(super) fn moments<T: Scalar>(x: &[T], (c, batch): (usize, usize)) -> (Vec<f64>, Vec<f64>) {
+pub(super) fn moments<T: Real>(x: &[T], (c, batch): (usize, usize)) -> (Vec<f64>, Vec<f64>) {
     let count = (x.len() / c.max(1)).max(1) as f64;
     let mean: Vec<f64> = channel_sums(x, (c, batch), None)
         .iter()
@@ -130,7 +130,7 @@ pub(super) fn moments<T: Scalar>(x: &[T], (c, batch): (usize, usize)) -> (Vec<f6
 
 /// out = [tanh]((x − m)·s·γ + β) per channel, with `inv_std` = s.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn bn_forward<T: Scalar>(
+pub(super) fn bn_forward<T: Real>(
     x: &[T],
     out: &mut [T],
     (mean, inv_std): (&[f64], &[f64]),
@@ -177,7 +177,7 @@ pub(super) fn bn_forward<T: Scalar>(
 /// Batch norm's backward pass (batch statistics), through tanh first if `tanh`: `g` holds the
 /// gradient at the output and receives the gradient at the input x; returns (dγ, dβ).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn bn_backward<T: Scalar>(
+pub(super) fn bn_backward<T: Real>(
     x: &[T],
     out: &[T],
     g: &mut [T],
@@ -274,7 +274,7 @@ pub(super) fn bn_backward<T: Scalar>(
 }
 
 /// x ← tanh(x).
-pub(super) fn tanh_inplace<T: Scalar>(x: &mut [T]) {
+pub(super) fn tanh_inplace<T: Real>(x: &mut [T]) {
     x.par_chunks_mut(1 << 14).for_each(|c| {
         wide(|| {
             c.iter_mut()
@@ -284,7 +284,7 @@ pub(super) fn tanh_inplace<T: Scalar>(x: &mut [T]) {
 }
 
 /// g ← g·(1 − y²) for the saved tanh output y.
-pub(super) fn tanh_backward<T: Scalar>(y: &[T], g: &mut [T]) {
+pub(super) fn tanh_backward<T: Real>(y: &[T], g: &mut [T]) {
     let one: T = of(1.0);
     g.par_chunks_mut(1 << 14)
         .zip(y.par_chunks(1 << 14))
@@ -298,7 +298,7 @@ pub(super) fn tanh_backward<T: Scalar>(y: &[T], g: &mut [T]) {
 }
 
 /// Σ (x̂ − x)² (f64), writing g = coeff·(x̂ − x).
-pub(super) fn sse_grad<T: Scalar>(x_hat: &[T], x: &[T], g: &mut [T], coeff: f64) -> f64 {
+pub(super) fn sse_grad<T: Real>(x_hat: &[T], x: &[T], g: &mut [T], coeff: f64) -> f64 {
     let k: T = of(coeff);
     let partial: Vec<f64> = g
         .par_chunks_mut(1 << 14)
@@ -318,7 +318,7 @@ pub(super) fn sse_grad<T: Scalar>(x_hat: &[T], x: &[T], g: &mut [T], coeff: f64)
 }
 
 /// Σ over the batch of a `[K, B]` array: out[k] = Σ_b x[k·B + b].
-pub(super) fn row_sums<T: Scalar>(x: &[T], batch: usize, out: &mut [T]) {
+pub(super) fn row_sums<T: Real>(x: &[T], batch: usize, out: &mut [T]) {
     out.par_iter_mut()
         .zip(x.par_chunks(batch.max(1)))
         .for_each(|(o, row)| {
@@ -327,7 +327,7 @@ pub(super) fn row_sums<T: Scalar>(x: &[T], batch: usize, out: &mut [T]) {
 }
 
 /// out `[K, B]` += bias[k] on every row.
-pub(super) fn add_row_bias<T: Scalar>(out: &mut [T], bias: &[T], batch: usize) {
+pub(super) fn add_row_bias<T: Real>(out: &mut [T], bias: &[T], batch: usize) {
     out.par_chunks_mut(batch.max(1))
         .zip(bias.par_iter())
         .for_each(|(row, &b)| row.iter_mut().for_each(|v| *v += b));

@@ -42,23 +42,17 @@ use crate::train::loss::LossWeights;
 use candle_core::{DType, Tensor};
 use net::Net;
 
-/// The float types the engine runs on (f32, f64).
-pub(crate) trait Scalar:
-    crate::numerics::real::Real + spectral_conv::Float + candle_core::WithDType
-{
-}
-impl Scalar for f32 {}
-impl Scalar for f64 {}
+pub(crate) use crate::numerics::real::Real;
 
-/// The value in f64 (the two float traits both name this method).
+/// The value in f64.
 #[inline(always)]
-pub(crate) fn f64_of<T: Scalar>(x: T) -> f64 {
-    crate::numerics::real::Real::to_f64(x)
+pub(crate) fn f64_of<T: Real>(x: T) -> f64 {
+    Real::as_f64(x)
 }
 
 /// An f64 in the float type.
 #[inline(always)]
-pub(crate) fn of<T: Scalar>(x: f64) -> T {
+pub(crate) fn of<T: Real>(x: f64) -> T {
     <T as crate::numerics::real::Real>::of(x)
 }
 

@@ -1,7 +1,7 @@
 //! The engine's network: its layer list, buffers, forward and backward passes (see `mod.rs`).
 
 use super::kernels as k;
-use super::{Scalar, StepLoss, f64_of, of};
+use super::{Real, StepLoss, f64_of, of};
 use crate::candle::batch_norm::BatchNorm;
 use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
@@ -124,7 +124,7 @@ struct LabelVars {
 #[derive(Debug)]
 struct Acts<T>(Vec<Vec<T>>);
 
-impl<T: Scalar> Acts<T> {
+impl<T: Real> Acts<T> {
     fn add(&mut self, len: usize) -> usize {
         self.0.push(vec![of(0.0); len]);
         self.0.len() - 1
@@ -193,7 +193,7 @@ fn internal(what: impl Into<String>) -> VaeError {
 }
 
 /// The contiguous data of a CPU storage of type `T`.
-fn cpu_slice<'a, T: Scalar>(s: &'a Storage, l: &Layout, what: &str) -> Result<&'a [T]> {
+fn cpu_slice<'a, T: Real>(s: &'a Storage, l: &Layout, what: &str) -> Result<&'a [T]> {
     let Storage::Cpu(cpu) = s else {
         return Err(internal(format!("{what} is not on the CPU")));
     };
@@ -205,7 +205,7 @@ fn cpu_slice<'a, T: Scalar>(s: &'a Storage, l: &Layout, what: &str) -> Result<&'
 }
 
 /// Runs `f` on the CPU data of the model's variables (read-locked meanwhile).
-fn with_weights<T: Scalar, R>(
+fn with_weights<T: Real, R>(
     vars: &[Var],
     names: &[String],
     f: impl FnOnce(&[&[T]]) -> Result<R>,
@@ -222,7 +222,7 @@ fn with_weights<T: Scalar, R>(
     f(&w)
 }
 
-impl<T: Scalar> Net<T> {
+impl<T: Real> Net<T> {
     pub fn max_batch(&self) -> usize {
         self.max_batch
     }

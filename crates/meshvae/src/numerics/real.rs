@@ -7,9 +7,12 @@ use candle_core::{Result, Tensor, bail};
 /// Rows (or elements) per parallel chunk.
 pub(crate) const CHUNK: usize = 1 << 14;
 
-/// f32 or f64.
+/// f32 or f64: what meshvae's CPU kernels need of a float type, beyond spectral-conv's kernels'
+/// ([`spectral_conv::Float`]) and candle's storage ([`candle_core::WithDType`]).
 pub(crate) trait Real:
-    Copy
+    spectral_conv::Float
+    + candle_core::WithDType
+    + Copy
     + Send
     + Sync
     + 'static
@@ -20,7 +23,8 @@ pub(crate) trait Real:
 {
     /// candle's name for this type.
     const DTYPE_OF: candle_core::DType;
-    fn to_f64(self) -> f64;
+    /// The value in f64 (`as_f64`: spectral-conv and candle each have a `to_f64`).
+    fn as_f64(self) -> f64;
     fn of(x: f64) -> Self;
     fn tanh(self) -> Self;
     fn sqrt(self) -> Self;
@@ -43,7 +47,7 @@ impl Real for f32 {
             _ => None,
         }
     }
-    fn to_f64(self) -> f64 {
+    fn as_f64(self) -> f64 {
         self as f64
     }
     fn of(x: f64) -> Self {
@@ -72,7 +76,7 @@ impl Real for f64 {
             _ => None,
         }
     }
-    fn to_f64(self) -> f64 {
+    fn as_f64(self) -> f64 {
         self
     }
     fn of(x: f64) -> Self {

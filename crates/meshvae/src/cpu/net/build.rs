@@ -5,7 +5,7 @@ use super::{
     Acts, Bn, Conv, ConvWeight, DenseVars, LabelVars, Latent, Net, Node, Pool, PoolOp, internal,
 };
 use crate::candle::model::MeshVae;
-use crate::cpu::{Scalar, of};
+use crate::cpu::{Real, of};
 use crate::error::Result;
 use crate::net::config::FEATURE_CHANNELS;
 use crate::net::plan::{ConvStep, ConvVars, PoolStep, Step};
@@ -20,7 +20,7 @@ use spectral_conv::{ChebKernel, MaxKernel, MaxMode, SparseKernel};
 const FAR_SHARE: f64 = 0.1;
 const FAR_WINDOW: usize = if cfg!(test) { 16 } else { 1024 };
 
-impl<T: Scalar> Net<T> {
+impl<T: Real> Net<T> {
     /// The network of `model` with buffers for batches of up to `max_batch`.
     pub fn build(model: &MeshVae, max_batch: usize) -> Result<Self> {
         let plan = model.plan();

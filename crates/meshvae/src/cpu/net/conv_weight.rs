@@ -1,6 +1,6 @@
 //! How a convolution's weight variables feed the fused Chebyshev kernel.
 
-use super::super::{Scalar, of};
+use super::super::{Real, of};
 use crate::error::Result;
 
 /// A convolution's weight variables (indices into the trainable list).
@@ -26,7 +26,7 @@ pub(super) enum Adjoint {
 
 impl ConvWeight {
     /// The kernel's `[C_in·K, C_out]` weight (`co` columns).
-    pub(super) fn stacked<'a, T: Scalar>(
+    pub(super) fn stacked<'a, T: Real>(
         self,
         w: &[&'a [T]],
         co: usize,
@@ -52,7 +52,7 @@ impl ConvWeight {
     /// Runs `f` on the kernel's weight gradient and stores it in the variables' gradients, or
     /// adds it there (`add`: an encoder convolution whose weights a tied decoder convolution
     /// shares; the decoder's backward pass runs first and writes its part).
-    pub(super) fn write_grad<T: Scalar>(
+    pub(super) fn write_grad<T: Real>(
         self,
         grads: &mut [Vec<T>],
         co: usize,

@@ -6,13 +6,13 @@
 use super::{BnStats, Net, cpu_slice, forward_node, with_weights};
 use crate::candle::model::MeshVae;
 use crate::cpu::kernels as k;
-use crate::cpu::{Scalar, f64_of};
+use crate::cpu::{Real, f64_of};
 use crate::error::{Result, VaeError};
 use crate::net::config::FEATURE_CHANNELS;
 use crate::train::loss::LossWeights;
 use candle_core::Tensor;
 
-impl<T: Scalar> Net<T> {
+impl<T: Real> Net<T> {
     /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]`, in inference mode. Leaves
     /// the last training step's gradients and batch statistics alone.
     pub fn rec_error(

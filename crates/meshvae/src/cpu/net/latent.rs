@@ -6,10 +6,10 @@
 use super::Net;
 use crate::cpu::gemm::{Mat, matmul, matmul_serial};
 use crate::cpu::kernels as k;
-use crate::cpu::{Scalar, f64_of, of};
+use crate::cpu::{Real, f64_of, of};
 use crate::train::loss::LossWeights;
 
-impl<T: Scalar> Net<T> {
+impl<T: Real> Net<T> {
     /// μ, σ, z and the decoder's dense layer; returns the batch mean of the KL divergence.
     pub(super) fn latent_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
         let kl = self.heads_forward(w, batch);

@@ -4,7 +4,7 @@
 use super::{Acts, Node, PoolOp};
 use crate::candle::batch_norm::BatchNorm;
 use crate::cpu::kernels as k;
-use crate::cpu::{Scalar, of};
+use crate::cpu::{Real, of};
 use crate::error::Result;
 use spectral_conv::ConvDims;
 
@@ -16,7 +16,7 @@ pub(super) enum BnStats {
     Running,
 }
 
-pub(super) fn forward_node<T: Scalar>(
+pub(super) fn forward_node<T: Real>(
     node: &mut Node,
     acts: &mut Acts<T>,
     w: &[&[T]],
@@ -106,7 +106,7 @@ pub(super) fn forward_node<T: Scalar>(
 
 /// Backward through one node: `g[0]` holds the gradient at its output; the gradient at its
 /// input ends in `g[1]` (returns true: swap them) or, for in-place steps, in `g[0]` (false).
-pub(super) fn backward_node<T: Scalar>(
+pub(super) fn backward_node<T: Real>(
     node: &mut Node,
     acts: &Acts<T>,
     w: &[&[T]],

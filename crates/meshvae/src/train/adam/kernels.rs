@@ -162,7 +162,7 @@ fn update_chunk<T: Real, const L2: bool>(
         let g = if L2 { g + *t * l2 } else { g };
         *m = *m * b1 + g * c1;
         *v = *v * b2 + (g * g) * c2;
-        *t = *t - (*m * sm) / ((*v * sv).sqrt() + eps) * lr;
+        *t -= (*m * sm) / ((*v * sv).sqrt() + eps) * lr;
     }
 }
 
@@ -175,11 +175,11 @@ fn square_sum<T: Real>(x: &[T]) -> f64 {
     let tail: f64 = blocks
         .remainder()
         .iter()
-        .map(|a| a.to_f64() * a.to_f64())
+        .map(|a| a.as_f64() * a.as_f64())
         .sum();
     for block in blocks {
         for (lane, a) in lanes.iter_mut().zip(block) {
-            let a = a.to_f64();
+            let a = a.as_f64();
             *lane += a * a;
         }
     }
