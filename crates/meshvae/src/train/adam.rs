@@ -140,6 +140,28 @@ impl Adam {
         Ok(())
     }
 
+    /// Counts a step and returns its update: the rate, the moments' decays and their bias
+    /// corrections, and the L2 weight.
+    fn next_update(&mut self, l2: f64) -> FusedUpdate {
+        self.step += 1;
+        let AdamConfig {
+            lr,
+            beta1,
+            beta2,
+            eps,
+        } = self.config;
+        let t = self.bias_steps();
+        FusedUpdate {
+            beta1,
+            beta2,
+            scale_m: 1.0 / (1.0 - beta1.powi(t)),
+            scale_v: 1.0 / (1.0 - beta2.powi(t)),
+            lr,
+            eps,
+            l2,
+        }
+    }
+
     /// The exponent of the bias correction of the step being taken.
     fn bias_steps(&self) -> i32 {
         i32::try_from(self.step - self.restarted_at).unwrap_or(i32::MAX)
@@ -155,25 +177,16 @@ impl Adam {
     /// [`Self::step`] on the full loss, without autograd holding a parameter-sized L2 gradient
     /// (and its sum with the others) for every variable at once.
     pub fn step_with_l2(&mut self, grads: &GradStore, l2: f64) -> Result<()> {
-        self.step += 1;
-        let AdamConfig {
-            lr,
-            beta1,
-            beta2,
-            eps,
-        } = self.config;
-        let t = self.bias_steps();
-        let scale_m = 1.0 / (1.0 - beta1.powi(t));
-        let scale_v = 1.0 / (1.0 - beta2.powi(t));
-        let update = FusedUpdate {
+        let update = self.next_update(l2);
+        let FusedUpdate {
             beta1,
             beta2,
             scale_m,
             scale_v,
             lr,
             eps,
-            l2,
-        };
+            ..
+        } = update;
         for slot in &self.slots {
             let Some(g) = grads.get(&slot.var) else {
                 continue;
@@ -256,23 +269,7 @@ impl Adam {
                 ),
             ));
         }
-        self.step += 1;
-        let AdamConfig {
-            lr,
-            beta1,
-            beta2,
-            eps,
-        } = self.config;
-        let t = self.bias_steps();
-        let update = FusedUpdate {
-            beta1,
-            beta2,
-            scale_m: 1.0 / (1.0 - beta1.powi(t)),
-            scale_v: 1.0 / (1.0 - beta2.powi(t)),
-            lr,
-            eps,
-            l2,
-        };
+        let update = self.next_update(l2);
         let mut half_sq = 0.0;
         for (s, g) in self.slots.iter().zip(grads) {
             half_sq += update.run_on(s, g)?;
