@@ -58,7 +58,7 @@ fn fifty_steps_match_candle_adamw_without_decay() {
 }
 
 #[test]
-fn fused_slices_update_like_the_two_ops_and_sum_the_squares() {
+fn grad_store_and_slice_steps_update_alike_and_sum_the_squares() {
     // Odd sizes: the eight-lane square sum has a ragged tail.
     let mut rng = Rng::new(5);
     let dev = Device::Cpu;
@@ -70,11 +70,11 @@ fn fused_slices_update_like_the_two_ops_and_sum_the_squares() {
     let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy().unwrap()).unwrap();
     let (a2, b2) = (copy(&a1), copy(&b1));
     let named = |a: &Var, b: &Var| vec![("a".to_string(), a.clone()), ("b".to_string(), b.clone())];
-    let mut two_ops = Adam::new(named(&a1, &b1), 1e-2).unwrap();
+    let mut from_store = Adam::new(named(&a1, &b1), 1e-2).unwrap();
     let mut fused = Adam::new(named(&a2, &b2), 1e-2).unwrap();
     let l2 = 0.3;
     for _ in 0..5 {
-        two_ops
+        from_store
             .step_with_l2(&loss(&a1, &b1, &t).backward().unwrap(), l2)
             .unwrap();
         let grads = loss(&a2, &b2, &t).backward().unwrap();
@@ -117,8 +117,28 @@ fn fused_slices_update_like_the_two_ops_and_sum_the_squares() {
         assert_eq!(
             bits(x),
             bits(y),
-            "the fused update differs from the two ops"
+            "the GradStore step differs from the slice step"
         );
+    }
+}
+
+/// The first step from zero moments is θ − lr·ĝ/(|ĝ| + ε) with ĝ = g + l2·θ (the bias
+/// corrections undo the decays exactly): the one update pass against the formula, in f64.
+#[test]
+fn first_step_is_the_sign_step_of_the_formula() {
+    let dev = Device::Cpu;
+    let theta0: Vec<f64> = vec![0.5, -1.25, 2.0, 0.0, -0.001, 3.5, 1e-3, -7.0, 0.25];
+    let g: Vec<f64> = vec![0.1, 0.2, -0.3, 1e-9, 0.0, -2.0, 5.0, 0.01, -0.02];
+    let var = Var::from_tensor(&Tensor::from_vec(theta0.clone(), 9, &dev).unwrap()).unwrap();
+    let (lr, l2) = (1e-2, 0.3);
+    let mut adam = Adam::new(vec![("w".to_string(), var.clone())], lr).unwrap();
+    adam.step_with_slices(&[g.as_slice()], l2).unwrap();
+    let eps = adam.config().eps;
+    let got: Vec<f64> = var.as_tensor().to_vec1().unwrap();
+    for i in 0..9 {
+        let gh = g[i] + l2 * theta0[i];
+        let want = theta0[i] - lr * gh / (gh.abs() + eps);
+        assert!((got[i] - want).abs() <= 1e-12, "{i}: {} vs {want}", got[i]);
     }
 }
 
