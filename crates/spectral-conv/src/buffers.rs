@@ -233,6 +233,12 @@ impl ChebKernel {
         self.k.saturating_sub(2) * self.a.rows() * batch * c_in
     }
 
+    /// Values of the `work` buffer [`Self::backward`] needs with dx: Clenshaw's b_{K−2} … b_1,
+    /// (K − 2) blocks of `V·C_in·B` (none for K ≤ 2).
+    pub fn work_len(&self, batch: usize, c_in: usize) -> usize {
+        self.k.saturating_sub(2) * self.a.rows() * c_in * batch
+    }
+
     fn shape(&self, d: ConvDims) -> ChebShape {
         ChebShape {
             batch: d.batch,
@@ -274,7 +280,8 @@ impl ChebKernel {
 
     /// The backward pass of [`Self::forward`] for the output gradient g `[V, C_out, B]`: writes
     /// dW (`[C_in·K, C_out]`, overwritten) and, if given, dx `[V, C_in, B]` (overwritten; `work`
-    /// must then hold `V·C_in·B` values for K ≥ 3, its contents are scratch).
+    /// must then hold [`Self::work_len`] values, its contents are scratch). Nothing is
+    /// allocated but dW's sums.
     #[allow(clippy::too_many_arguments)]
     pub fn backward<T: Float>(
         &self,
@@ -291,10 +298,11 @@ impl ChebKernel {
         let size = self.a.rows() * d.c_in * d.batch;
         check_len(OP, "g", g.len(), self.a.rows() * d.c_out * d.batch)?;
         check_len(OP, "dw", dw.len(), w.len())?;
+        let work_len = self.work_len(d.batch, d.c_in);
         if let Some((dx, work)) = &dx {
             check_len(OP, "dx", dx.len(), size)?;
-            if self.k >= 3 && work.len() < size {
-                check_len(OP, "work", work.len(), size)?;
+            if work.len() < work_len {
+                check_len(OP, "work", work.len(), work_len)?;
             }
         }
         let s = self.shape(d);
@@ -304,13 +312,10 @@ impl ChebKernel {
             terms.chunks(size).collect()
         };
         let bufs = match dx {
-            Some((dx, work)) => {
-                let len = size.min(work.len());
-                Bufs {
-                    dx: Some((Io::VertexChannel, dx)),
-                    work: Some(&mut work[..len]),
-                }
-            }
+            Some((dx, work)) => Bufs {
+                dx: Some((Io::VertexChannel, dx)),
+                work: Some(&mut work[..work_len]),
+            },
             None => Bufs {
                 dx: None,
                 work: None,

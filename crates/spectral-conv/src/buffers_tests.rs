@@ -71,7 +71,7 @@ fn cheb_kernel_matches_the_candle_op_with_gradients() {
             Tensor::from_vec(vcb_to_vbc(&g, (v, co, batch)), (v, batch, co), &Device::Cpu).unwrap();
         let grads = (yt * gt).unwrap().sum_all().unwrap().backward().unwrap();
         let mut dw = vec![0.0; w.len()];
-        let (mut dx, mut work) = (vec![5.0; x.len()], vec![3.0; x.len()]);
+        let (mut dx, mut work) = (vec![5.0; x.len()], vec![3.0; kernel.work_len(batch, ci)]);
         kernel
             .backward(&x, &terms, &w, &g, d, &mut dw, Some((&mut dx, &mut work)))
             .unwrap();

@@ -41,7 +41,7 @@ pub(crate) fn backward<T: Real>(
     let size = s.batch * s.v * s.ci;
     let mut dx = need.x.then(|| vec![T::ZERO; size]);
     // Sweep 1 writes b_{K−2} into a recycled buffer (K ≥ 3) or, for K ≤ 2, dx itself.
-    let mut work = (need.x && s.k >= 3).then(|| scratch::take(size));
+    let mut work = (need.x && s.k >= 3).then(|| scratch::take((s.k - 2) * size));
     let bufs = Bufs {
         dx: dx.as_deref_mut().map(|d| (io, d)),
         work: work.as_deref_mut(),
@@ -53,8 +53,9 @@ pub(crate) fn backward<T: Real>(
     Grads { dx, dw, db }
 }
 
-/// Where [`backward_into`] writes dx (and in which layout), and its work buffer for b_{K−2}
-/// (channel-major, `V·ci·B` values; needed when dx is wanted and K ≥ 3).
+/// Where [`backward_into`] writes dx (and in which layout), and its work buffer for Clenshaw's
+/// b_{K−2} … b_1 ((K − 2) channel-major blocks of `V·ci·B` values; needed when dx is wanted and
+/// K ≥ 3).
 pub(crate) struct Bufs<'a, T> {
     pub dx: Option<(Io, &'a mut [T])>,
     pub work: Option<&'a mut [T]>,
@@ -76,6 +77,7 @@ pub(crate) fn backward_into<T: Real>(
     need: Need,
 ) -> (Option<Vec<T>>, Option<Vec<T>>) {
     let k = s.k;
+    let size = s.batch * s.v * s.ci;
     let n_w = k * s.ci * s.co;
     let internal = k >= 3;
     let w1 = match k {
@@ -91,7 +93,7 @@ pub(crate) fn backward_into<T: Real>(
     let (mut dx, mut work) = (dx, work);
     let first: Option<(Io, &mut [T])> = match (internal, dx.as_mut(), work.as_deref_mut()) {
         (false, Some((io, d)), _) => Some((*io, &mut **d)),
-        (true, Some(_), Some(wb)) => Some((Io::VertexChannel, wb)),
+        (true, Some(_), Some(wb)) => Some((Io::VertexChannel, &mut wb[..size])),
         _ => None,
     };
     let dests = match first {

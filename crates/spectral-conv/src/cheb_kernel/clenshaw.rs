@@ -6,31 +6,27 @@ use super::weights::weights_t;
 use crate::kernel::{Csr, Madd, Real, Staging, chunk_span, multiversion};
 use crate::layout::{Blocks, ChunkOut, Io, chunk_outs};
 use crate::mix::{MixDims, mix};
-use crate::scratch;
 use rayon::prelude::*;
 
 /// Clenshaw's recurrence from b_{K−2} (K ≥ 3) down to dx = b_0, written to `dx` (layout `io`).
+/// `work` holds (K − 2) channel-major `V·ci·B` blocks: block j is b_{K−2−j}, block 0 written by
+/// the caller, the others here (the caller's scratch: nothing is allocated).
 pub(super) fn clenshaw<T: Real>(
     at: &Csr,
     w: &[T],
     g: Blocks<'_, T>,
-    b_first: &[T],
+    work: &mut [T],
     s: &ChebShape,
     (io, dx): (Io, &mut [T]),
 ) {
     let size = s.batch * s.v * s.ci;
-    // chain[j] = b_{K−2−j}: b_{K−2} is the caller's, the later ones recycled buffers.
-    let mut chain: Vec<Vec<T>> = Vec::new();
     let mut dx = Some(dx);
     for k in (0..=s.k - 3).rev() {
         let alpha = T::from_f64(if k == 0 { 1.0 } else { 2.0 });
-        let b = |kk: usize| -> &[T] {
-            if kk == s.k - 2 {
-                b_first
-            } else {
-                &chain[s.k - 3 - kk]
-            }
-        };
+        // b_k goes to block K − 2 − k; the b it reads are in the blocks before.
+        let (done, rest) = work.split_at_mut((s.k - 2 - k) * size);
+        let done = &*done;
+        let b = |kk: usize| -> &[T] { &done[(s.k - 2 - kk) * size..][..size] };
         // b_{k+2} = b_{K−1} = g W_{K−1}ᵀ was never stored: subtract it through the weights.
         let (wt_k, after) = if k + 2 == s.k - 1 {
             (weights_t(w, s, (1.0, k), Some((-1.0, s.k - 1))), None)
@@ -38,13 +34,13 @@ pub(super) fn clenshaw<T: Real>(
             (weights_t(w, s, (1.0, k), None), Some(b(k + 2)))
         };
         let next = Blocks::channel_major(b(k + 1), s.batch, s.ci);
-        let mut own = (k > 0).then(|| scratch::take(size));
-        let (out_io, out): (Io, &mut [T]) = match own.as_deref_mut() {
-            Some(o) => (Io::VertexChannel, o),
-            None => match dx.take() {
+        let (out_io, out): (Io, &mut [T]) = if k > 0 {
+            (Io::VertexChannel, &mut rest[..size])
+        } else {
+            match dx.take() {
                 Some(d) => (io, d),
                 None => return,
-            },
+            }
         };
         chunk_outs(out, out_io, (s.batch, s.v, s.ci))
             .into_par_iter()
@@ -53,10 +49,6 @@ pub(super) fn clenshaw<T: Real>(
                 let step = (alpha, after);
                 clenshaw_chunk(at, g, &wt_k, step, next, s, chunk, dest, staging)
             });
-        chain.extend(own);
-    }
-    for done in chain {
-        scratch::give(done);
     }
 }
 

@@ -207,6 +207,13 @@ impl<T: Real> Net<T> {
             ));
         }
         let x_hat = cur;
+        let work_len = (enc.iter().chain(&dec))
+            .filter_map(|node| match node {
+                Node::Conv(c) => Some(c.kernel.work_len(max_batch, c.ci)),
+                Node::Pool(_) => None,
+            })
+            .max()
+            .unwrap_or(0);
         let l = config.latent;
         let lat_buf = || vec![of(0.0); max_batch * l];
         let heads = plan.heads;
@@ -256,7 +263,8 @@ impl<T: Real> Net<T> {
             dec_grad: vec![of(0.0); flat * max_batch],
             ga: vec![of(0.0); max_act],
             gb: vec![of(0.0); max_act],
-            work: vec![of(0.0); max_act],
+            // The convolutions' Clenshaw buffers (K − 2 blocks), or an activation's size.
+            work: vec![of(0.0); work_len.max(max_act)],
             batch: 0,
             order,
             cond: vec![of(0.0); max_batch * config.labels.len()],

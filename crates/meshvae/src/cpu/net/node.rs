@@ -144,7 +144,7 @@ pub(super) fn backward_node<T: Real>(
             };
             let tl = c.kernel.terms_len(batch, c.ci);
             let dx = if c.need_dx {
-                Some((&mut gb[..nx], &mut work[..nx]))
+                Some((&mut gb[..nx], &mut work[..c.kernel.work_len(batch, c.ci)]))
             } else {
                 None
             };
