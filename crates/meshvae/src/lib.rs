@@ -11,8 +11,11 @@
 //! a learning-rate schedule, early stopping on the validation loss ([`Schedule`]; a run says
 //! why it stopped, [`StopReason`]), checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
 //! backward over reused buffers ([`Engine`], checked against candle's autograd) when it
-//! supports the model, and candle's autograd otherwise; which one ran, and why candle where it
-//! did, is said in the log, `run.json` and the summary ([`Executor`]). A conditional model
+//! supports the model (every CPU model with K ≤ 8), and candle's autograd otherwise; which one
+//! ran, and why candle where it did, is said in the log, `run.json` and the summary
+//! ([`Executor`]). The applications' encoding and decoding run on the same engine on the CPU
+//! ([`TrainedModel::reconstruct_batch`]). Both executors are built from one network
+//! description (`net/plan.rs`). A conditional model
 //! (`ModelConfig::labels`) also takes each mesh's label (see `candle/model/cond.rs`); generation,
 //! interpolation and embedding work on the trained folder ([`TrainedModel`]).
 //!
