@@ -31,7 +31,7 @@ use mesh_hierarchy::{
 use qem_simplify::{RemeshConfig, SimplifyConfig, remesh, simplify};
 use spectral_conv::{
     Backend, ChebConv, ChebKernel, ConvDims, DePool, MaxMode, MaxPool, MeanPool, SparseKernel,
-    SparseOp, locality_order, permute_symmetric,
+    SparseOp, Workspace, locality_order, permute_symmetric,
 };
 use std::hint::black_box;
 use std::time::Duration;
@@ -235,10 +235,11 @@ fn conv(c: &mut Criterion) {
             let (mut y, mut dx) = (vec![0.0f32; n], vec![0.0f32; n]);
             let mut work = vec![0.0f32; kernel.work_len(BATCH, CHANNELS)];
             let mut dw = vec![0.0f32; wv.len()];
+            let ws = Workspace::new();
             group.bench_function("cheb K=3 fwd, buffer-level", |b| {
                 b.iter(|| {
                     kernel
-                        .forward(&xv, &wv, d, &mut terms, &mut y)
+                        .forward(&xv, &wv, d, &mut terms, &mut y, &ws)
                         .expect("forward");
                     black_box(y[0])
                 })
@@ -246,11 +247,11 @@ fn conv(c: &mut Criterion) {
             group.bench_function("cheb K=3 fwd+bwd, buffer-level", |b| {
                 b.iter(|| {
                     kernel
-                        .forward(&xv, &wv, d, &mut terms, &mut y)
+                        .forward(&xv, &wv, d, &mut terms, &mut y, &ws)
                         .expect("forward");
                     let bufs = Some((dx.as_mut_slice(), work.as_mut_slice()));
                     kernel
-                        .backward(&xv, &terms, &wv, &gv, d, &mut dw, bufs)
+                        .backward(&xv, &terms, &wv, &gv, d, &mut dw, bufs, &ws)
                         .expect("backward");
                     black_box(dx[0])
                 })

@@ -14,6 +14,7 @@ use crate::kernel::{Csr, Real, spmm_axpby};
 use crate::layout::{Blocks, Io};
 use crate::max_kernel::{MaxMode, max_pool, max_unpool};
 use crate::spmm::SparseOp;
+use crate::workspace::Workspace;
 use sparse_csr::CsrMatrix;
 use std::sync::Arc;
 
@@ -257,7 +258,8 @@ impl ChebKernel {
     }
 
     /// y = conv(x): x `[V, C_in, B]`, y `[V, C_out, B]` (overwritten); `terms`
-    /// ([`Self::terms_len`] values) receives what [`Self::backward`] reads.
+    /// ([`Self::terms_len`] values) receives what [`Self::backward`] reads. The sweeps stage
+    /// chunks of vertices in buffers of `ws`.
     pub fn forward<T: Float>(
         &self,
         x: &[T],
@@ -265,6 +267,7 @@ impl ChebKernel {
         d: ConvDims,
         terms: &mut [T],
         y: &mut [T],
+        ws: &Workspace,
     ) -> Result<()> {
         const OP: &str = "ChebKernel::forward";
         self.check(OP, d, x.len(), w.len(), terms.len())?;
@@ -272,16 +275,16 @@ impl ChebKernel {
         let s = self.shape(d);
         let xb = Blocks::channel_major(x, d.batch, d.c_in);
         let mut outs: Vec<&mut [T]> = split_terms(terms, self.k, self.a.rows() * d.batch * d.c_in);
-        cheb_kernel::stored_terms_into(&self.a, xb, &s, &mut outs);
+        cheb_kernel::stored_terms_into(&self.a, xb, &s, &mut outs, ws);
         let refs: Vec<&[T]> = outs.into_iter().map(|t| &*t).collect();
-        cheb_kernel::mix_terms(&self.a, xb, &refs, w, None, &s, (Io::VertexChannel, y));
+        cheb_kernel::mix_terms(&self.a, xb, &refs, w, None, &s, (Io::VertexChannel, y), ws);
         Ok(())
     }
 
     /// The backward pass of [`Self::forward`] for the output gradient g `[V, C_out, B]`: writes
     /// dW (`[C_in·K, C_out]`, overwritten) and, if given, dx `[V, C_in, B]` (overwritten; `work`
     /// must then hold [`Self::work_len`] values, its contents are scratch). Nothing is
-    /// allocated but dW's sums.
+    /// allocated but dW's sums; the sweeps stage chunks in buffers of `ws`.
     #[allow(clippy::too_many_arguments)]
     pub fn backward<T: Float>(
         &self,
@@ -292,6 +295,7 @@ impl ChebKernel {
         d: ConvDims,
         dw: &mut [T],
         dx: Option<(&mut [T], &mut [T])>,
+        ws: &Workspace,
     ) -> Result<()> {
         const OP: &str = "ChebKernel::backward";
         self.check(OP, d, x.len(), w.len(), terms.len())?;
@@ -315,10 +319,12 @@ impl ChebKernel {
             Some((dx, work)) => Bufs {
                 dx: Some((Io::VertexChannel, dx)),
                 work: Some(&mut work[..work_len]),
+                ws,
             },
             None => Bufs {
                 dx: None,
                 work: None,
+                ws,
             },
         };
         let need = Need {

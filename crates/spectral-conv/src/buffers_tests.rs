@@ -48,7 +48,9 @@ fn cheb_kernel_matches_the_candle_op_with_gradients() {
         let g = random_vec(v * co * batch, 4);
         let mut terms = vec![0.0; kernel.terms_len(batch, ci)];
         let mut y = vec![7.0; v * co * batch];
-        kernel.forward(&x, &w, d, &mut terms, &mut y).unwrap();
+        kernel
+            .forward(&x, &w, d, &mut terms, &mut y, &Workspace::new())
+            .unwrap();
         // The candle op on the same data, [V, B, C].
         let xt = candle_core::Var::from_vec(
             vcb_to_vbc(&x, (v, ci, batch)),
@@ -73,7 +75,16 @@ fn cheb_kernel_matches_the_candle_op_with_gradients() {
         let mut dw = vec![0.0; w.len()];
         let (mut dx, mut work) = (vec![5.0; x.len()], vec![3.0; kernel.work_len(batch, ci)]);
         kernel
-            .backward(&x, &terms, &w, &g, d, &mut dw, Some((&mut dx, &mut work)))
+            .backward(
+                &x,
+                &terms,
+                &w,
+                &g,
+                d,
+                &mut dw,
+                Some((&mut dx, &mut work)),
+                &Workspace::new(),
+            )
             .unwrap();
         let want_dw: Vec<f64> = grads
             .get(&wt)
@@ -101,7 +112,7 @@ fn cheb_kernel_matches_the_candle_op_with_gradients() {
         // Without dx, dW is the same.
         let mut dw2 = vec![0.0; w.len()];
         kernel
-            .backward(&x, &terms, &w, &g, d, &mut dw2, None)
+            .backward(&x, &terms, &w, &g, d, &mut dw2, None, &Workspace::new())
             .unwrap();
         assert_eq!(dw, dw2);
     }
@@ -112,7 +123,14 @@ fn cheb_kernel_matches_the_candle_op_with_gradients() {
         c_out: 3,
     };
     let err = kernel
-        .forward(&[0.0; 5], &[0.0; 27], d, &mut [], &mut [0.0; 540])
+        .forward(
+            &[0.0; 5],
+            &[0.0; 27],
+            d,
+            &mut [],
+            &mut [0.0; 540],
+            &Workspace::new(),
+        )
         .unwrap_err()
         .to_string();
     assert!(err.contains("x has 5 values"), "{err}");
@@ -156,14 +174,24 @@ fn renumbered_kernels_give_the_renumbered_results() {
         random_vec(ci * 3 * co, 2),
         random_vec(v * co * batch, 3),
     );
+    let ws = Workspace::new();
     let run = |k: &ChebKernel, x: &[f64], g: &[f64]| {
         let mut terms = vec![0.0; k.terms_len(batch, ci)];
         let mut y = vec![0.0; v * co * batch];
-        k.forward(x, &w, d, &mut terms, &mut y).unwrap();
+        k.forward(x, &w, d, &mut terms, &mut y, &ws).unwrap();
         let (mut dw, mut dx, mut work) =
             (vec![0.0; w.len()], vec![0.0; x.len()], vec![0.0; x.len()]);
-        k.backward(x, &terms, &w, g, d, &mut dw, Some((&mut dx, &mut work)))
-            .unwrap();
+        k.backward(
+            x,
+            &terms,
+            &w,
+            g,
+            d,
+            &mut dw,
+            Some((&mut dx, &mut work)),
+            &ws,
+        )
+        .unwrap();
         (y, dw, dx)
     };
     let (y, dw, dx) = run(&kernel, &x, &g);
@@ -435,7 +463,9 @@ fn kernels_from_the_matrix_equal_those_of_the_candle_operator() {
     let run = |kernel: &ChebKernel| {
         let mut terms = vec![0.0; kernel.terms_len(d.batch, d.c_in)];
         let mut y = vec![0.0; v * d.c_out * d.batch];
-        kernel.forward(&x, &w, d, &mut terms, &mut y).unwrap();
+        kernel
+            .forward(&x, &w, d, &mut terms, &mut y, &Workspace::new())
+            .unwrap();
         y
     };
     let from_op = run(&ChebKernel::new(&op, 3).unwrap());

@@ -195,6 +195,7 @@ impl ChebConv {
             self.laplacian.csr_t().clone(),
             self.k,
             io,
+            self.laplacian.workspace().clone(),
         );
         let (x, w) = (x.contiguous()?, self.weight.contiguous()?);
         Ok(Some(match &self.bias {
@@ -271,6 +272,35 @@ mod tests {
 
     fn grid_laplacian(n: usize, m: usize) -> sparse_csr::CsrMatrix {
         mesh_laplacian(n * m, &grid_faces(n, m))
+    }
+
+    #[test]
+    fn layers_keep_their_scratch_in_their_operators_workspace() {
+        // 300 vertices × 9 channels × B = 32: the channel-major copies and stored terms are
+        // large enough to be kept for reuse.
+        let m = random_matrix(300, 300, 0.015, 90);
+        let shared = std::sync::Arc::new(crate::Workspace::new());
+        let op = SparseOp::new(&m, &Device::Cpu)
+            .unwrap()
+            .with_workspace(shared.clone());
+        let other = SparseOp::new(&m, &Device::Cpu).unwrap();
+        assert!(!std::sync::Arc::ptr_eq(other.workspace(), &shared));
+        let conv = layer(&op, 3, 9, 9, false, 1);
+        let x = Var::from_tensor(&tensor(random_vec(32 * 300 * 9, 2), &[32, 300, 9])).unwrap();
+        assert_eq!(shared.kept_bytes(), 0);
+        let y = conv.forward(x.as_tensor()).unwrap();
+        weighted_sum(&y, 3).unwrap().backward().unwrap();
+        drop(y);
+        let kept = shared.kept_bytes();
+        assert!(kept >= 300 * 9 * 32 * 8, "{kept} bytes kept");
+        assert_eq!(other.workspace().kept_bytes(), 0, "nothing in another op's");
+        // A second pass reuses them rather than adding more.
+        let y = conv.forward(x.as_tensor()).unwrap();
+        weighted_sum(&y, 3).unwrap().backward().unwrap();
+        drop(y);
+        assert_eq!(shared.kept_bytes(), kept);
+        shared.clear();
+        assert_eq!(shared.kept_bytes(), 0);
     }
 
     fn layer(op: &SparseOp, k: usize, ci: usize, co: usize, bias: bool, seed: u64) -> ChebConv {
@@ -420,7 +450,7 @@ mod tests {
     fn fused_matches_fallback_across_chunks_lanes_and_instruction_sets() {
         // 300 vertices span several kernel chunks; non-symmetric, so L̃ᵀ ≠ L̃. B = 11 covers the
         // 8-lane blocks and their tail; the baseline round runs the non-AVX code; B = 32 makes
-        // buffers large enough to be recycled (scratch.rs) between the rounds.
+        // buffers large enough to be reused (the operator's workspace) between the rounds.
         let m = random_matrix(300, 300, 0.015, 90);
         let op = SparseOp::new(&m, &Device::Cpu).unwrap();
         let _lock = crate::kernel::BASELINE_LOCK.lock();

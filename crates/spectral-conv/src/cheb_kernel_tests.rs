@@ -4,6 +4,7 @@ use crate::cheb_kernel::{ChebShape, Need, backward, forward};
 use crate::kernel::Csr;
 use crate::layout::{Blocks, Io, to_channel_major};
 use crate::test_util::{dense_apply, random_matrix, random_vec};
+use crate::workspace::Workspace;
 use sparse_csr::CsrMatrix;
 
 /// Σ_k T_k(A) x W_k + b by dense recurrences on `[B, V, C]`, W in the authors' layout.
@@ -61,7 +62,7 @@ fn blocks<'a>(
     dims: (usize, usize, usize),
 ) -> Blocks<'a, f64> {
     if io == Io::BatchMajor {
-        *copy = to_channel_major(data, io, dims);
+        *copy = to_channel_major(data, io, dims, &Workspace::new());
         Blocks::channel_major(copy, dims.0, dims.2)
     } else {
         Blocks::new(data, io, dims.0, dims.2)
@@ -103,7 +104,7 @@ fn fused_forward_and_adjoint_match_dense_reference_in_every_layout() {
             let gd = permute(&g, io, (batch, v, co));
             let (mut xcopy, mut gcopy) = (Vec::new(), Vec::new());
             let xb = blocks(&xd, &mut xcopy, io, (batch, v, ci));
-            let (y, stored) = forward(&a, xb, &w, Some(&bias), &s, io);
+            let (y, stored) = forward(&a, xb, &w, Some(&bias), &s, io, &Workspace::new());
             let want_io = permute(&want, io, (batch, v, co));
             for (p, q) in y.iter().zip(&want_io) {
                 assert!((p - q).abs() < 1e-12, "{case}: forward");
@@ -115,7 +116,18 @@ fn fused_forward_and_adjoint_match_dense_reference_in_every_layout() {
                 w: true,
                 b: true,
             };
-            let grads = backward(&a, &at, xb, &refs(&stored), &w, gb, &s, io, all);
+            let grads = backward(
+                &a,
+                &at,
+                xb,
+                &refs(&stored),
+                &w,
+                gb,
+                &s,
+                io,
+                all,
+                &Workspace::new(),
+            );
             let (dx, dw, db) = (grads.dx.unwrap(), grads.dw.unwrap(), grads.db.unwrap());
             let dx = {
                 // Back to [B, V, C] for the comparison.
@@ -153,7 +165,18 @@ fn fused_forward_and_adjoint_match_dense_reference_in_every_layout() {
                 w: true,
                 b: false,
             };
-            let part = backward(&a, &at, xb, &refs(&stored), &w, gb, &s, io, only_w);
+            let part = backward(
+                &a,
+                &at,
+                xb,
+                &refs(&stored),
+                &w,
+                gb,
+                &s,
+                io,
+                only_w,
+                &Workspace::new(),
+            );
             assert!(part.dx.is_none() && part.db.is_none(), "{case}");
             assert_eq!(part.dw.unwrap(), dw, "{case}");
         }

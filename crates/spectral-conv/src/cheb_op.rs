@@ -5,8 +5,8 @@
 use crate::cheb_kernel::{self, ChebShape, Need};
 use crate::kernel::{Csr, Real};
 use crate::layout::{Blocks, Io, to_channel_major};
-use crate::scratch::{self, Recycled};
 use crate::spmm::contiguous_span;
+use crate::workspace::{Recycled, Workspace};
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Storage, Tensor, WithDType};
 use std::any::Any;
@@ -19,6 +19,7 @@ pub(crate) struct ChebOp {
     at: Arc<Csr>,
     k: usize,
     io: Io,
+    ws: Arc<Workspace>,
     saved: Mutex<Option<Arc<dyn Any + Send + Sync>>>,
 }
 
@@ -30,7 +31,7 @@ struct Saved<T: Real> {
 
 impl<T: Real> Saved<T> {
     fn terms(&self) -> &[Vec<T>] {
-        &self.bufs.0[usize::from(self.x_copy)..]
+        &self.bufs.bufs[usize::from(self.x_copy)..]
     }
 }
 
@@ -42,13 +43,22 @@ struct Args<'a, T> {
 }
 
 impl ChebOp {
-    pub(crate) fn new(a: Arc<Csr>, at: Arc<Csr>, k: usize, io: Io) -> Self {
+    pub(crate) fn new(a: Arc<Csr>, at: Arc<Csr>, k: usize, io: Io, ws: Arc<Workspace>) -> Self {
         Self {
             a,
             at,
             k,
             io,
+            ws,
             saved: Mutex::new(None),
+        }
+    }
+
+    /// Buffers that return to this op's workspace when the last reference goes.
+    fn recycled<T: Real>(&self, bufs: Vec<Vec<T>>) -> Recycled<T> {
+        Recycled {
+            bufs,
+            home: self.ws.clone(),
         }
     }
 
@@ -102,28 +112,28 @@ impl ChebOp {
         let mut bufs = Vec::new();
         let x_copy = self.io == Io::BatchMajor;
         if x_copy {
-            bufs.push(to_channel_major(x, self.io, (s.batch, s.v, s.ci)));
+            bufs.push(to_channel_major(x, self.io, (s.batch, s.v, s.ci), &self.ws));
         }
-        let terms = cheb_kernel::stored_terms(&self.a, self.x_blocks(x, bufs.first(), s), s);
+        let xb = self.x_blocks(x, bufs.first(), s);
+        let terms = cheb_kernel::stored_terms(&self.a, xb, s, &self.ws);
         bufs.extend(terms);
         Saved {
             x_copy,
-            bufs: Recycled(bufs),
+            bufs: self.recycled(bufs),
         }
     }
 
     fn run<T: Real>(&self, args: Args<'_, T>, s: &ChebShape) -> Vec<T> {
         let x_copy = (self.io == Io::BatchMajor)
-            .then(|| to_channel_major(args.x, self.io, (s.batch, s.v, s.ci)));
+            .then(|| to_channel_major(args.x, self.io, (s.batch, s.v, s.ci), &self.ws));
         let xb = self.x_blocks(args.x, x_copy.as_ref(), s);
-        let (y, terms) = cheb_kernel::forward(&self.a, xb, args.w, args.b, s, self.io);
+        let (y, terms) = cheb_kernel::forward(&self.a, xb, args.w, args.b, s, self.io, &self.ws);
         let mut bufs: Vec<Vec<T>> = x_copy.into_iter().collect();
+        let x_copy = !bufs.is_empty();
+        bufs.extend(terms);
         let saved = Saved {
-            x_copy: !bufs.is_empty(),
-            bufs: Recycled({
-                bufs.extend(terms);
-                bufs
-            }),
+            x_copy,
+            bufs: self.recycled(bufs),
         };
         if let Ok(mut slot) = self.saved.lock() {
             *slot = Some(Arc::new(saved));
@@ -200,17 +210,19 @@ impl ChebOp {
             candle_core::bail!("cheb-conv: gradient of shape {:?}", g_layout.dims());
         }
         let saved = self.stored(xs, &s);
-        let xb = self.x_blocks(xs, saved.x_copy.then(|| &saved.bufs.0[0]), &s);
+        let xb = self.x_blocks(xs, saved.x_copy.then(|| &saved.bufs.bufs[0]), &s);
         let g_copy = (self.io == Io::BatchMajor)
-            .then(|| to_channel_major(gs, self.io, (s.batch, s.v, s.co)));
+            .then(|| to_channel_major(gs, self.io, (s.batch, s.v, s.co), &self.ws));
         let gb = match &g_copy {
             Some(c) => Blocks::channel_major(c, s.batch, s.co),
             None => Blocks::new(gs, self.io, s.batch, s.co),
         };
         let terms: Vec<&[T]> = saved.terms().iter().map(|t| t.as_slice()).collect();
-        let grads = cheb_kernel::backward(&self.a, &self.at, xb, &terms, ws, gb, &s, self.io, need);
+        let grads = cheb_kernel::backward(
+            &self.a, &self.at, xb, &terms, ws, gb, &s, self.io, need, &self.ws,
+        );
         if let Some(c) = g_copy {
-            scratch::give(c);
+            self.ws.give(c);
         }
         let dx = grads
             .dx

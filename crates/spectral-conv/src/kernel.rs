@@ -18,6 +18,8 @@
 
 use crate::error::{ConvError, Result};
 use crate::layout::{ChunkOut, Io, chunk_outs, to_channel_major};
+pub(crate) use crate::workspace::Staging;
+use crate::workspace::{Pools, Workspace};
 use rayon::prelude::*;
 use sparse_csr::CsrMatrix;
 use std::ops::{Add, AddAssign, Mul, Sub};
@@ -46,10 +48,8 @@ pub trait Real:
     fn mul_add(self, a: Self, b: Self) -> Self;
     /// The matrix values in this precision.
     fn values(csr: &Csr) -> &[Self];
-    /// The recycled buffers of this type (see `scratch.rs`).
-    fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>>;
-    /// The recycled staging buffer sets of this type (see [`Staging`]).
-    fn staging_pool() -> &'static std::sync::Mutex<Vec<Vec<Vec<Self>>>>;
+    /// This type's buffers of a [`crate::Workspace`] (given both).
+    fn pools<'a>(f32s: &'a Pools<f32>, f64s: &'a Pools<f64>) -> &'a Pools<Self>;
     /// dst[s·B + b] = runs[b][s] (see `transpose.rs`).
     fn gather_runs(runs: &[&[Self]], dst: &mut [Self]) {
         crate::transpose::gather_runs_scalar(runs, dst);
@@ -103,11 +103,8 @@ impl Real for f32 {
     fn values(csr: &Csr) -> &[Self] {
         &csr.values_f32
     }
-    fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
-        &crate::scratch::POOL_F32
-    }
-    fn staging_pool() -> &'static std::sync::Mutex<Vec<Vec<Vec<Self>>>> {
-        &crate::scratch::STAGING_F32
+    fn pools<'a>(f32s: &'a Pools<f32>, _: &'a Pools<f64>) -> &'a Pools<Self> {
+        f32s
     }
     fn gather_runs(runs: &[&[Self]], dst: &mut [Self]) {
         crate::transpose::gather_runs_f32(runs, dst);
@@ -156,11 +153,8 @@ impl Real for f64 {
     fn values(csr: &Csr) -> &[Self] {
         csr.matrix.values()
     }
-    fn scratch_pool() -> &'static std::sync::Mutex<Vec<Vec<Self>>> {
-        &crate::scratch::POOL_F64
-    }
-    fn staging_pool() -> &'static std::sync::Mutex<Vec<Vec<Vec<Self>>>> {
-        &crate::scratch::STAGING_F64
+    fn pools<'a>(_: &'a Pools<f32>, f64s: &'a Pools<f64>) -> &'a Pools<Self> {
+        f64s
     }
 }
 
@@ -321,56 +315,6 @@ impl Csr {
     }
 }
 
-/// Per-task staging buffers: one set per rayon job (`for_each_init`, `fold`) rather than per
-/// chunk, and recycled across calls (a dropped set goes back to a pool): rayon starts a few
-/// jobs per parallel loop, and fresh sets cost page faults and zeroing in every sweep of every
-/// layer. Contents are left from earlier chunks; every kernel overwrites what it uses.
-pub(crate) struct Staging<T: Real> {
-    bufs: Vec<Vec<T>>,
-}
-
-/// Staging sets kept per float type (a few per thread).
-const STAGING_KEEP: usize = 16;
-
-impl<T: Real> Drop for Staging<T> {
-    fn drop(&mut self) {
-        if let Ok(mut pool) = T::staging_pool().lock()
-            && pool.len() < STAGING_KEEP
-        {
-            pool.push(std::mem::take(&mut self.bufs));
-        }
-    }
-}
-
-impl<T: Real> Staging<T> {
-    pub fn new() -> Self {
-        let bufs = T::staging_pool()
-            .lock()
-            .ok()
-            .and_then(|mut pool| pool.pop())
-            .unwrap_or_default();
-        Self { bufs }
-    }
-
-    /// `N` buffers of the given lengths.
-    pub fn get<const N: usize>(&mut self, lens: [usize; N]) -> [&mut [T]; N] {
-        if self.bufs.len() < N {
-            self.bufs.resize_with(N, Vec::new);
-        }
-        let mut bufs = self.bufs.iter_mut();
-        std::array::from_fn(|k| match bufs.next() {
-            Some(v) => {
-                if v.len() < lens[k] {
-                    v.resize(lens[k], T::ZERO);
-                }
-                &mut v[..lens[k]]
-            }
-            // Unreachable: `bufs` was just given at least N buffers.
-            None => &mut [],
-        })
-    }
-}
-
 /// The first vertex of chunk `chunk` and its vertex count, for `v` vertices.
 #[inline(always)]
 pub(crate) fn chunk_span(chunk: usize, v: usize) -> (usize, usize) {
@@ -480,20 +424,26 @@ pub(crate) fn load_chunk<T: Real>(
 
 /// y = A x for x `[B, A.cols, c]`, returning `[B, A.rows, c]` (through a channel-major copy of
 /// x when B > 1; for B = 1 the layouts coincide and the rows are gathered directly).
-pub(crate) fn spmm_batch_major<T: Real>(a: &Csr, x: &[T], batch: usize, c: usize) -> Vec<T> {
+pub(crate) fn spmm_batch_major<T: Real>(
+    a: &Csr,
+    x: &[T],
+    (batch, c): (usize, usize),
+    ws: &Workspace,
+) -> Vec<T> {
     let mut y = vec![T::ZERO; batch * a.rows() * c];
     if batch <= 1 {
         spmm_axpby(a, T::from_f64(1.0), x, T::ZERO, None, &mut y, c);
         return y;
     }
-    let xcm = to_channel_major(x, Io::BatchMajor, (batch, a.cols(), c));
+    let xcm = to_channel_major(x, Io::BatchMajor, (batch, a.cols(), c), ws);
     chunk_outs(&mut y, Io::BatchMajor, (batch, a.rows(), c))
         .into_par_iter()
         .enumerate()
-        .for_each_init(Staging::new, |staging, (chunk, dest)| {
-            gather_chunk(a, &xcm, batch * c, chunk, dest, staging)
-        });
-    crate::scratch::give(xcm);
+        .for_each_init(
+            || Staging::new(ws),
+            |staging, (chunk, dest)| gather_chunk(a, &xcm, batch * c, chunk, dest, staging),
+        );
+    ws.give(xcm);
     y
 }
 
@@ -504,7 +454,7 @@ multiversion!(
         n: usize,
         chunk: usize,
         dest: ChunkOut<'_, T>,
-        staging: &mut Staging<T>,
+        staging: &mut Staging<'_, T>,
     ) => gather_chunk_body
 );
 
@@ -515,7 +465,7 @@ fn gather_chunk_body<T: Real, M: Madd>(
     n: usize,
     chunk: usize,
     mut dest: ChunkOut<'_, T>,
-    staging: &mut Staging<T>,
+    staging: &mut Staging<'_, T>,
 ) {
     let (i0, cnt) = chunk_span(chunk, a.rows());
     let [blocks, _, _] = staging.get([cnt * n, 0, 0]);
@@ -560,13 +510,14 @@ mod tests {
         for (batch, c) in [(1usize, 3usize), (3, 9), (2, 5)] {
             let x = random_vec(batch * 270 * c, 5);
             let want = dense_apply(&m, &x, batch, c);
-            let y = spmm_batch_major(&a, &x, batch, c);
+            let ws = Workspace::new();
+            let y = spmm_batch_major(&a, &x, (batch, c), &ws);
             assert!(
                 y.iter().zip(&want).all(|(p, q)| (p - q).abs() < 1e-12),
                 "B={batch}"
             );
             // x[b, i, o] sits at cm[i, o, b].
-            let cm = to_channel_major(&x, Io::BatchMajor, (batch, 270, c));
+            let cm = to_channel_major(&x, Io::BatchMajor, (batch, 270, c), &ws);
             for (b, i, o) in [(0, 0, 0), (batch - 1, 7, c - 1), (batch / 2, 269, c / 2)] {
                 assert_eq!(cm[(i * c + o) * batch + b], x[(b * 270 + i) * c + o]);
             }

@@ -93,14 +93,15 @@ impl<'a, T: Real> Blocks<'a, T> {
 }
 
 /// `x` (layout `io`, V vertices × C channels × B) as a channel-major `[V, C, B]` copy in a
-/// recycled buffer (see `scratch.rs`).
+/// buffer of `ws`.
 pub(crate) fn to_channel_major<T: Real>(
     x: &[T],
     io: Io,
     (batch, v, c): (usize, usize, usize),
+    ws: &crate::workspace::Workspace,
 ) -> Vec<T> {
     let n = batch * c;
-    let mut out = crate::scratch::take(v * n);
+    let mut out = ws.take(v * n);
     if n == 0 {
         return out;
     }
@@ -223,9 +224,33 @@ mod tests {
             }
         }
         let dims = (batch, v, c);
-        assert_eq!(to_channel_major(&bvc, Io::BatchMajor, dims), vcb);
-        assert_eq!(to_channel_major(&vbc, Io::VertexBatch, dims), vcb);
-        assert_eq!(to_channel_major(&vcb, Io::VertexChannel, dims), vcb);
+        assert_eq!(
+            to_channel_major(
+                &bvc,
+                Io::BatchMajor,
+                dims,
+                &crate::workspace::Workspace::new()
+            ),
+            vcb
+        );
+        assert_eq!(
+            to_channel_major(
+                &vbc,
+                Io::VertexBatch,
+                dims,
+                &crate::workspace::Workspace::new()
+            ),
+            vcb
+        );
+        assert_eq!(
+            to_channel_major(
+                &vcb,
+                Io::VertexChannel,
+                dims,
+                &crate::workspace::Workspace::new()
+            ),
+            vcb
+        );
         // A chunk of [V, B, C] blocks, and a gathered row, come out channel-major.
         let blocks = Blocks::new(&vbc, Io::VertexBatch, batch, c);
         let mut buf = vec![0.0; 4 * batch * c];

@@ -30,8 +30,12 @@
 //! where it pays:
 //! [`ChebKernel::far_share`] measures the scatter, [`ChebKernel::locality_order`] gives an order,
 //! and [`ChebKernel::permuted`] and [`SparseKernel::permuted`] the renumbered operators
-//! (`docs/crates.md`, "Buffer-level kernels and vertex order"). Large intermediates are
-//! recycled between calls ([`release_scratch`] frees them).
+//! (`docs/crates.md`, "Buffer-level kernels and vertex order").
+//!
+//! Scratch memory is explicit: the buffer-level kernels stage their work in a [`Workspace`] the
+//! caller passes; each [`SparseOp`] (and every layer built on it) holds one, its own unless
+//! [`SparseOp::with_workspace`] gives it a shared one. Large intermediates are reused between
+//! calls from there; dropping the workspace (or [`Workspace::clear`]) frees them.
 //!
 //! ```
 //! use candle_core::{DType, Device, Tensor};
@@ -77,7 +81,6 @@ mod max_kernel;
 mod mix;
 mod order;
 mod pool;
-mod scratch;
 mod simd;
 mod spatial;
 mod spmm;
@@ -86,6 +89,7 @@ mod test_util;
 mod transpose;
 #[cfg(test)]
 mod vertex_major_tests;
+mod workspace;
 
 pub use buffers::{ChebKernel, ConvDims, Float, MaxKernel, SparseKernel};
 pub use cheb::{ChebConfig, ChebConv};
@@ -93,7 +97,7 @@ pub use error::{ConvError, Result};
 pub use max_kernel::MaxMode;
 pub use order::{inverse_order, locality_order, permute_symmetric};
 pub use pool::{DePool, MaxPool, MeanPool, Sampling};
-pub use scratch::release_scratch;
 pub use sparse_csr::CsrMatrix;
 pub use spatial::{SpatialConfig, SpatialConv, neighbour_mean_matrix};
 pub use spmm::{Backend, SparseOp};
+pub use workspace::Workspace;

@@ -16,6 +16,7 @@ use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real};
 use crate::max_kernel::{MaxMode, max_pool, max_unpool};
 use crate::spmm::{Backend, SparseOp, contiguous_span, use_kernel};
+use crate::workspace::Workspace;
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Storage, Tensor};
 use sparse_csr::CsrMatrix;
@@ -36,6 +37,12 @@ macro_rules! sparse_layer {
             /// The same layer with another backend.
             pub fn with_backend(&self, backend: Backend) -> Self {
                 Self(self.0.with_backend(backend))
+            }
+
+            /// The same layer keeping its kernels' scratch in `workspace` (see
+            /// [`SparseOp::with_workspace`]).
+            pub fn with_workspace(&self, workspace: Arc<Workspace>) -> Self {
+                Self(self.0.with_workspace(workspace))
             }
 
             /// `[B, cols, C]` (or `[cols, C]`) → `[B, rows, C]` (or `[rows, C]`).

@@ -11,6 +11,7 @@
 
 use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real, spmm_batch_major};
+use crate::workspace::Workspace;
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Tensor};
 use sparse_csr::CsrMatrix;
@@ -28,11 +29,13 @@ pub enum Backend {
 
 /// A fixed sparse operator A (`rows × cols`), applied to `[B, cols, C]` features.
 ///
-/// Cheap to clone (the matrices are shared), so one Laplacian can serve several layers.
+/// Cheap to clone (the matrices and the [`Workspace`] are shared), so one Laplacian can serve
+/// several layers.
 #[derive(Debug, Clone)]
 pub struct SparseOp {
     inner: Arc<Inner>,
     backend: Backend,
+    workspace: Arc<Workspace>,
 }
 
 #[derive(Debug)]
@@ -68,7 +71,8 @@ impl Inner {
 
 impl SparseOp {
     /// Prepares A for products on `device` (A, Aᵀ in both precisions, and the fallback's index
-    /// tensors). The backend defaults to [`Backend::Kernel`].
+    /// tensors). The backend defaults to [`Backend::Kernel`]; the kernels' scratch goes to a
+    /// new [`Workspace`] of its own ([`Self::with_workspace`] shares one).
     pub fn new(matrix: &CsrMatrix, device: &Device) -> Result<Self> {
         if matrix.rows() > u32::MAX as usize || matrix.cols() > u32::MAX as usize {
             return Err(ConvError::argument(
@@ -86,15 +90,30 @@ impl SparseOp {
         Ok(Self {
             inner: Arc::new(Inner::build(a, at, device)?),
             backend: Backend::Kernel,
+            workspace: Arc::default(),
         })
     }
 
     /// The same operator with another backend (the matrices stay shared).
     pub fn with_backend(&self, backend: Backend) -> Self {
         Self {
-            inner: self.inner.clone(),
             backend,
+            ..self.clone()
         }
+    }
+
+    /// The same operator keeping its kernels' scratch in `workspace` (one per network keeps
+    /// the memory of all its layers in one place; see [`Workspace`]).
+    pub fn with_workspace(&self, workspace: Arc<Workspace>) -> Self {
+        Self {
+            workspace,
+            ..self.clone()
+        }
+    }
+
+    /// Where the kernels of this operator, and of the layers built on it, keep their scratch.
+    pub fn workspace(&self) -> &Arc<Workspace> {
+        &self.workspace
     }
 
     pub fn backend(&self) -> Backend {
@@ -136,7 +155,7 @@ impl SparseOp {
         )?;
         Ok(Self {
             inner: Arc::new(inner),
-            backend: self.backend,
+            ..self.clone()
         })
     }
 
@@ -153,6 +172,7 @@ impl SparseOp {
             x3.contiguous()?.apply_op1(SpmmOp {
                 a: self.inner.a.clone(),
                 at: self.inner.at.clone(),
+                ws: self.workspace.clone(),
             })?
         } else {
             self.fallback(&x3)?
@@ -279,6 +299,7 @@ pub(crate) fn contiguous_span(op: &str, layout: &Layout) -> candle_core::Result<
 struct SpmmOp {
     a: Arc<Csr>,
     at: Arc<Csr>,
+    ws: Arc<Workspace>,
 }
 
 impl SpmmOp {
@@ -292,7 +313,7 @@ impl SpmmOp {
                 self.a.cols()
             );
         }
-        let y = spmm_batch_major(&self.a, x, batch, c);
+        let y = spmm_batch_major(&self.a, x, (batch, c), &self.ws);
         Ok((y, Shape::from((batch, self.a.rows(), c))))
     }
 }
@@ -322,6 +343,7 @@ impl CustomOp1 for SpmmOp {
         let transposed = SpmmOp {
             a: self.at.clone(),
             at: self.a.clone(),
+            ws: self.ws.clone(),
         };
         Ok(Some(grad.contiguous()?.apply_op1(transposed)?))
     }

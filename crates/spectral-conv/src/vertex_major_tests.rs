@@ -368,6 +368,7 @@ fn timing_probe() {
             lap.csr_t().clone(),
             3,
             crate::layout::Io::VertexChannel,
+            lap.workspace().clone(),
         );
         x.apply_op2(w.as_tensor(), op)
     };

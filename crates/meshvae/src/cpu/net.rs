@@ -9,7 +9,8 @@ use crate::net::config::FEATURE_CHANNELS;
 use crate::train::adam::{Adam, GradSource};
 use crate::train::loss::LossWeights;
 use candle_core::{Layout, Storage, Tensor, Var};
-use spectral_conv::{ChebKernel, MaxKernel, SparseKernel};
+use spectral_conv::{ChebKernel, MaxKernel, SparseKernel, Workspace};
+use std::sync::Arc;
 
 mod build;
 mod conv_weight;
@@ -47,6 +48,8 @@ impl Bn {
 #[derive(Debug)]
 struct Conv {
     kernel: ChebKernel,
+    /// The kernels' staging buffers: one workspace for all of the network's convolutions.
+    ws: Arc<Workspace>,
     v: usize,
     ci: usize,
     co: usize,

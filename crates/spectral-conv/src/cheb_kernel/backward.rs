@@ -7,7 +7,7 @@ use super::{ChebShape, Ctx};
 use crate::kernel::{CHUNK_ROWS, Csr, Madd, Real, Staging, chunk_span, multiversion};
 use crate::layout::{Blocks, ChunkOut, Io, chunk_outs};
 use crate::mix::{LANES, MixDims, dot_chunk, mix};
-use crate::scratch;
+use crate::workspace::Workspace;
 use rayon::prelude::*;
 
 /// The gradients asked for: dx (in the caller's layout), dW `[ci·K, co]`, db `[co]`.
@@ -37,33 +37,36 @@ pub(crate) fn backward<T: Real>(
     s: &ChebShape,
     io: Io,
     need: Need,
+    ws: &Workspace,
 ) -> Grads<T> {
     let size = s.batch * s.v * s.ci;
     let mut dx = need.x.then(|| vec![T::ZERO; size]);
     // Sweep 1 writes b_{K−2} into a recycled buffer (K ≥ 3) or, for K ≤ 2, dx itself.
-    let mut work = (need.x && s.k >= 3).then(|| scratch::take((s.k - 2) * size));
+    let mut work = (need.x && s.k >= 3).then(|| ws.take((s.k - 2) * size));
     let bufs = Bufs {
         dx: dx.as_deref_mut().map(|d| (io, d)),
         work: work.as_deref_mut(),
+        ws,
     };
     let (dw, db) = backward_into(a, at, x, terms, w, g, s, bufs, need);
     if let Some(work) = work {
-        scratch::give(work);
+        ws.give(work);
     }
     Grads { dx, dw, db }
 }
 
 /// Where [`backward_into`] writes dx (and in which layout), and its work buffer for Clenshaw's
 /// b_{K−2} … b_1 ((K − 2) channel-major blocks of `V·ci·B` values; needed when dx is wanted and
-/// K ≥ 3).
+/// K ≥ 3), and the workspace its sweeps stage chunks in.
 pub(crate) struct Bufs<'a, T> {
     pub dx: Option<(Io, &'a mut [T])>,
     pub work: Option<&'a mut [T]>,
+    pub ws: &'a Workspace,
 }
 
 /// The backward pass into given buffers: dx (if `bufs.dx`), and returns dW `[ci·K, co]` and db
-/// as asked by `need` (`need.x` is ignored: dx is computed iff a buffer is given). The Clenshaw
-/// terms b_1 … b_{K−3} (only for K ≥ 4) come from the recycled buffers of `scratch.rs`.
+/// as asked by `need` (`need.x` is ignored: dx is computed iff a buffer is given). Clenshaw's
+/// b_{K−2} … b_1 go to `bufs.work`; the sweeps' staging comes from `bufs.ws`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn backward_into<T: Real>(
     a: &Csr,
@@ -89,7 +92,7 @@ pub(crate) fn backward_into<T: Real>(
             w1
         }
     };
-    let Bufs { dx, work } = bufs;
+    let Bufs { dx, work, ws } = bufs;
     let (mut dx, mut work) = (dx, work);
     let first: Option<(Io, &mut [T])> = match (internal, dx.as_mut(), work.as_deref_mut()) {
         (false, Some((io, d)), _) => Some((*io, &mut **d)),
@@ -107,9 +110,12 @@ pub(crate) fn backward_into<T: Real>(
     let partials: Vec<Vec<f64>> = dests
         .into_par_iter()
         .enumerate()
-        .map_init(Staging::new, |staging, (chunk, dest)| {
-            sweep_chunk(&ctx, at, g, &w1, (chunk, sums, need.w), dest, staging)
-        })
+        .map_init(
+            || Staging::new(ws),
+            |staging, (chunk, dest)| {
+                sweep_chunk(&ctx, at, g, &w1, (chunk, sums, need.w), dest, staging)
+            },
+        )
         .collect();
     let mut total = vec![0.0f64; n_w + s.co];
     for p in &partials {
@@ -120,7 +126,7 @@ pub(crate) fn backward_into<T: Real>(
         .b
         .then(|| total[n_w..].iter().map(|&v| T::from_f64(v)).collect());
     if let (true, Some((io, d)), Some(wb)) = (internal, dx, work) {
-        clenshaw(at, w, g, wb, s, (io, d));
+        clenshaw(at, w, g, wb, s, (io, d), ws);
     }
     (dw, db)
 }
@@ -134,7 +140,7 @@ multiversion!(
         w1: &[T],
         job: (usize, Option<usize>, bool),
         dest: ChunkOut<'_, T>,
-        staging: &mut Staging<T>,
+        staging: &mut Staging<'_, T>,
     ) -> Vec<f64> => sweep_chunk_body
 );
 
@@ -150,7 +156,7 @@ fn sweep_chunk_body<T: Real, M: Madd>(
     w1: &[T],
     (chunk, sums, need_w): (usize, Option<usize>, bool),
     mut dest: ChunkOut<'_, T>,
-    staging: &mut Staging<T>,
+    staging: &mut Staging<'_, T>,
 ) -> Vec<f64> {
     let s = ctx.s;
     let (k, ci, co, batch) = (s.k, s.ci, s.co, s.batch);

@@ -6,6 +6,7 @@ use super::weights::weights_t;
 use crate::kernel::{Csr, Madd, Real, Staging, chunk_span, multiversion};
 use crate::layout::{Blocks, ChunkOut, Io, chunk_outs};
 use crate::mix::{MixDims, mix};
+use crate::workspace::Workspace;
 use rayon::prelude::*;
 
 /// Clenshaw's recurrence from b_{K−2} (K ≥ 3) down to dx = b_0, written to `dx` (layout `io`).
@@ -18,6 +19,7 @@ pub(super) fn clenshaw<T: Real>(
     work: &mut [T],
     s: &ChebShape,
     (io, dx): (Io, &mut [T]),
+    ws: &Workspace,
 ) {
     let size = s.batch * s.v * s.ci;
     let mut dx = Some(dx);
@@ -45,10 +47,13 @@ pub(super) fn clenshaw<T: Real>(
         chunk_outs(out, out_io, (s.batch, s.v, s.ci))
             .into_par_iter()
             .enumerate()
-            .for_each_init(Staging::new, |staging, (chunk, dest)| {
-                let step = (alpha, after);
-                clenshaw_chunk(at, g, &wt_k, step, next, s, chunk, dest, staging)
-            });
+            .for_each_init(
+                || Staging::new(ws),
+                |staging, (chunk, dest)| {
+                    let step = (alpha, after);
+                    clenshaw_chunk(at, g, &wt_k, step, next, s, chunk, dest, staging)
+                },
+            );
     }
 }
 
@@ -63,7 +68,7 @@ multiversion!(
         s: &ChebShape,
         chunk: usize,
         dest: ChunkOut<'_, T>,
-        staging: &mut Staging<T>,
+        staging: &mut Staging<'_, T>,
     ) => clenshaw_chunk_body
 );
 
@@ -80,7 +85,7 @@ fn clenshaw_chunk_body<T: Real, M: Madd>(
     s: &ChebShape,
     chunk: usize,
     mut dest: ChunkOut<'_, T>,
-    staging: &mut Staging<T>,
+    staging: &mut Staging<'_, T>,
 ) {
     let (batch, ci, co) = (s.batch, s.ci, s.co);
     let (n, n_out) = (ci * batch, co * batch);

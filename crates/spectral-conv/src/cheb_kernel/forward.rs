@@ -6,17 +6,22 @@ use super::{ChebShape, Ctx, MAX_K};
 use crate::kernel::{CHUNK_ROWS, Csr, Madd, Real, Staging, chunk_span, multiversion};
 use crate::layout::{Blocks, ChunkOut, Io, chunk_outs};
 use crate::mix::{MixDims, mix};
-use crate::scratch;
+use crate::workspace::Workspace;
 use rayon::prelude::*;
 
 /// T_1 … T_{K−2} (none for K ≤ 2), channel-major `[V, ci, B]`: what the later sweeps read.
-pub(crate) fn stored_terms<T: Real>(a: &Csr, x: Blocks<'_, T>, s: &ChebShape) -> Vec<Vec<T>> {
+pub(crate) fn stored_terms<T: Real>(
+    a: &Csr,
+    x: Blocks<'_, T>,
+    s: &ChebShape,
+    ws: &Workspace,
+) -> Vec<Vec<T>> {
     let n = s.batch * s.ci;
     let mut terms: Vec<Vec<T>> = (1..s.k.saturating_sub(1))
-        .map(|_| scratch::take(s.v * n))
+        .map(|_| ws.take(s.v * n))
         .collect();
     let mut outs: Vec<&mut [T]> = terms.iter_mut().map(|t| t.as_mut_slice()).collect();
-    stored_terms_into(a, x, s, &mut outs);
+    stored_terms_into(a, x, s, &mut outs, ws);
     terms
 }
 
@@ -26,6 +31,7 @@ pub(crate) fn stored_terms_into<T: Real>(
     x: Blocks<'_, T>,
     s: &ChebShape,
     terms: &mut [&mut [T]],
+    ws: &Workspace,
 ) {
     let n = s.batch * s.ci;
     for k in 1..s.k.saturating_sub(1) {
@@ -39,9 +45,10 @@ pub(crate) fn stored_terms_into<T: Real>(
         if n > 0 {
             out.par_chunks_mut(CHUNK_ROWS * n)
                 .enumerate()
-                .for_each_init(Staging::new, |staging, (chunk, out)| {
-                    term_chunk(a, src, prev, s, chunk, out, staging)
-                });
+                .for_each_init(
+                    || Staging::new(ws),
+                    |staging, (chunk, out)| term_chunk(a, src, prev, s, chunk, out, staging),
+                );
         }
     }
 }
@@ -55,7 +62,7 @@ multiversion!(
         s: &ChebShape,
         chunk: usize,
         out: &mut [T],
-        staging: &mut Staging<T>,
+        staging: &mut Staging<'_, T>,
     ) => term_chunk_body
 );
 
@@ -69,7 +76,7 @@ fn term_chunk_body<T: Real, M: Madd>(
     s: &ChebShape,
     chunk: usize,
     out: &mut [T],
-    staging: &mut Staging<T>,
+    staging: &mut Staging<'_, T>,
 ) {
     let n = s.batch * s.ci;
     let (i0, cnt) = chunk_span(chunk, s.v);
@@ -95,16 +102,18 @@ pub(crate) fn forward<T: Real>(
     bias: Option<&[T]>,
     s: &ChebShape,
     io: Io,
+    ws: &Workspace,
 ) -> (Vec<T>, Vec<Vec<T>>) {
-    let terms = stored_terms(a, x, s);
+    let terms = stored_terms(a, x, s, ws);
     let mut y = vec![T::ZERO; s.batch * s.v * s.co];
     let refs: Vec<&[T]> = terms.iter().map(|t| t.as_slice()).collect();
-    mix_terms(a, x, &refs, w, bias, s, (io, &mut y));
+    mix_terms(a, x, &refs, w, bias, s, (io, &mut y), ws);
     (y, terms)
 }
 
 /// The forward's last sweep: T_{K−1} from the stored terms, all K terms mixed into y (layout
 /// `io`).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn mix_terms<T: Real>(
     a: &Csr,
     x: Blocks<'_, T>,
@@ -113,15 +122,17 @@ pub(crate) fn mix_terms<T: Real>(
     bias: Option<&[T]>,
     s: &ChebShape,
     (io, y): (Io, &mut [T]),
+    ws: &Workspace,
 ) {
     let wk = weights_k_major(w, s);
     let ctx = Ctx { a, x, terms, s };
     chunk_outs(y, io, (s.batch, s.v, s.co))
         .into_par_iter()
         .enumerate()
-        .for_each_init(Staging::new, |staging, (chunk, dest)| {
-            forward_chunk(&ctx, &wk, bias, chunk, dest, staging)
-        });
+        .for_each_init(
+            || Staging::new(ws),
+            |staging, (chunk, dest)| forward_chunk(&ctx, &wk, bias, chunk, dest, staging),
+        );
 }
 
 multiversion!(
@@ -131,7 +142,7 @@ multiversion!(
         bias: Option<&[T]>,
         chunk: usize,
         dest: ChunkOut<'_, T>,
-        staging: &mut Staging<T>,
+        staging: &mut Staging<'_, T>,
     ) => forward_chunk_body
 );
 
@@ -142,7 +153,7 @@ fn forward_chunk_body<T: Real, M: Madd>(
     bias: Option<&[T]>,
     chunk: usize,
     mut dest: ChunkOut<'_, T>,
-    staging: &mut Staging<T>,
+    staging: &mut Staging<'_, T>,
 ) {
     let s = ctx.s;
     let (n, n_out) = (s.ci * s.batch, s.co * s.batch);

@@ -10,8 +10,9 @@ use crate::net::plan::{ConvStep, ConvVars, NetPlan, PoolStep, Step};
 use candle_core::{Device, Var};
 use mesh_hierarchy::PoolMode;
 use spectral_conv::{
-    ChebConv, DePool, MaxMode, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv,
+    ChebConv, DePool, MaxMode, MaxPool, MeanPool, Sampling, SparseOp, SpatialConv, Workspace,
 };
+use std::sync::Arc;
 
 /// The sparse operators of one of the plan's distinct convolution operators: A (L̃ for
 /// spectral, D⁻¹A for spatial convolutions) and, when decoder convolutions are tied, Aᵀ.
@@ -28,11 +29,14 @@ pub(super) fn stages(
     state: &[Var],
     device: &Device,
 ) -> Result<(Vec<Stage>, Vec<Stage>)> {
+    // One workspace for the kernels' scratch of every layer: its buffers serve the layers in
+    // turn rather than each layer keeping its own.
+    let ws = Arc::new(Workspace::new());
     let operators = plan
         .operators
         .iter()
         .map(|m| {
-            let op = SparseOp::new(m, device)?;
+            let op = SparseOp::new(m, device)?.with_workspace(ws.clone());
             let op_t = if config.tie_decoder_convs {
                 Some(op.transpose()?)
             } else {
@@ -47,8 +51,8 @@ pub(super) fn stages(
                 let level = &operators[plan.levels[c.spec.level].operator];
                 Stage::Conv(conv_block(config, c, level, params, state)?)
             }
-            Step::Pool(p) if p.is_depool() => Stage::Up(up(p, device)?),
-            Step::Pool(p) => Stage::Down(down(p, device)?),
+            Step::Pool(p) if p.is_depool() => Stage::Up(up(p, device, &ws)?),
+            Step::Pool(p) => Stage::Down(down(p, device, &ws)?),
         })
     };
     let enc = plan.encoder.iter().map(stage).collect::<Result<Vec<_>>>()?;
@@ -101,25 +105,28 @@ fn conv_block(
 }
 
 /// Pooling from level i to level i + 1, as the step's mode applies.
-fn down(step: &PoolStep, device: &Device) -> Result<Down> {
+fn down(step: &PoolStep, device: &Device, ws: &Arc<Workspace>) -> Result<Down> {
     let m = &step.matrix;
     Ok(match step.mode {
-        PoolMode::Mean => Down::Mean(MeanPool::new(m, device)?),
+        PoolMode::Mean => Down::Mean(MeanPool::new(m, device)?.with_workspace(ws.clone())),
         PoolMode::SignedMax => Down::Max(MaxPool::new(m, device)?),
         // The plain max over each neighbourhood (the pooling matrix's rows).
         PoolMode::Max => Down::Max(MaxPool::with_mode(m, MaxMode::Plain, device)?),
-        PoolMode::Sampling => Down::Sampling(Sampling::new(m, device)?),
+        PoolMode::Sampling => Down::Sampling(Sampling::new(m, device)?.with_workspace(ws.clone())),
         PoolMode::Identity => Down::Identity,
     })
 }
 
 /// De-pooling from level i + 1 back to level i: the de-pooling matrix's product (for the max
 /// poolings the mean over the neighbourhoods containing each fine vertex).
-fn up(step: &PoolStep, device: &Device) -> Result<Up> {
+fn up(step: &PoolStep, device: &Device, ws: &Arc<Workspace>) -> Result<Up> {
     let m = &step.matrix;
+    let ws = ws.clone();
     Ok(match step.mode {
-        PoolMode::Mean | PoolMode::SignedMax | PoolMode::Max => Up::DePool(DePool::new(m, device)?),
-        PoolMode::Sampling => Up::Sampling(Sampling::new(m, device)?),
+        PoolMode::Mean | PoolMode::SignedMax | PoolMode::Max => {
+            Up::DePool(DePool::new(m, device)?.with_workspace(ws))
+        }
+        PoolMode::Sampling => Up::Sampling(Sampling::new(m, device)?.with_workspace(ws)),
         PoolMode::Identity => Up::Identity,
     })
 }

@@ -11,7 +11,8 @@ use crate::net::config::FEATURE_CHANNELS;
 use crate::net::plan::{ConvStep, ConvVars, PoolStep, Step};
 use candle_core::Var;
 use mesh_hierarchy::PoolMode;
-use spectral_conv::{ChebKernel, MaxKernel, MaxMode, SparseKernel};
+use spectral_conv::{ChebKernel, MaxKernel, MaxMode, SparseKernel, Workspace};
+use std::sync::Arc;
 
 /// When level 0 is renumbered: more than this share of its neighbours lie more than
 /// [`FAR_WINDOW`] positions apart. 1,024 vertex blocks (1.2 MB at B = 32, C = 9) is beyond the
@@ -30,6 +31,7 @@ impl<T: Real> Net<T> {
         let counts = plan.vertex_counts();
         let config = model.config();
         let mut acts = Acts(Vec::new());
+        let ws = Arc::new(Workspace::new());
         let mut max_act = 0;
         let mut add = |acts: &mut Acts<T>, v: usize, c: usize| {
             max_act = max_act.max(v * c * max_batch);
@@ -118,6 +120,7 @@ impl<T: Real> Net<T> {
             };
             Ok(Node::Conv(Conv {
                 kernel,
+                ws: ws.clone(),
                 v,
                 ci: s.c_in,
                 co: s.c_out,

@@ -40,6 +40,7 @@ pub(super) fn forward_node<T: Real>(
                 d,
                 &mut terms[..tl],
                 &mut pre[..ny],
+                &c.ws,
             );
             acts.put(c.terms, terms);
             if let (Some(bn), BnStats::Running) = (&c.bn, stats) {
@@ -158,6 +159,7 @@ pub(super) fn backward_node<T: Real>(
                     d,
                     dw,
                     dx,
+                    &c.ws,
                 )?;
                 Ok(())
             })?;
