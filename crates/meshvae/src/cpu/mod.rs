@@ -40,7 +40,7 @@ use crate::error::{Result, VaeError};
 use crate::train::adam::Adam;
 use crate::train::loss::LossWeights;
 use candle_core::{DType, Tensor};
-use net::Net;
+use net::{Inputs, Net};
 
 pub(crate) use crate::numerics::real::Real;
 
@@ -70,6 +70,16 @@ pub struct StepLoss {
 enum Typed {
     F32(Net<f32>),
     F64(Net<f64>),
+}
+
+/// `$body` with `$net` bound to the engine's network, whichever its float type.
+macro_rules! on_net {
+    ($net:expr, $n:ident => $body:expr) => {
+        match $net {
+            Typed::F32($n) => $body,
+            Typed::F64($n) => $body,
+        }
+    };
 }
 
 /// The hand-written training step of one model (see the module documentation).
@@ -138,10 +148,7 @@ impl Engine {
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<StepLoss> {
-        match &mut self.net {
-            Typed::F32(n) => n.step(model, x, c, eps, weights),
-            Typed::F64(n) => n.step(model, x, c, eps, weights),
-        }
+        on_net!(&mut self.net, n => n.step(model, Inputs { x, c }, (eps, weights)))
     }
 
     /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]` in inference mode (z = μ, the
@@ -160,10 +167,7 @@ impl Engine {
         c: Option<&Tensor>,
         weights: &LossWeights,
     ) -> Result<f64> {
-        match &mut self.net {
-            Typed::F32(n) => n.rec_error(model, x, c, weights),
-            Typed::F64(n) => n.rec_error(model, x, c, weights),
-        }
+        on_net!(&mut self.net, n => n.rec_error(model, Inputs { x, c }, weights))
     }
 
     /// μ and σ `[B, latent]` of features x `[B, V, 9]` in inference mode (the batch norms'
@@ -175,10 +179,7 @@ impl Engine {
         x: &Tensor,
         c: Option<&Tensor>,
     ) -> Result<(Tensor, Tensor)> {
-        match &mut self.net {
-            Typed::F32(n) => n.encode(model, x, c),
-            Typed::F64(n) => n.encode(model, x, c),
-        }
+        on_net!(&mut self.net, n => n.encode(model, Inputs { x, c }))
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` in inference mode, as
@@ -189,10 +190,7 @@ impl Engine {
         z: &Tensor,
         c: Option<&Tensor>,
     ) -> Result<Tensor> {
-        match &mut self.net {
-            Typed::F32(n) => n.decode(model, z, c),
-            Typed::F64(n) => n.decode(model, z, c),
-        }
+        on_net!(&mut self.net, n => n.decode(model, z, c))
     }
 
     /// decode(μ(x, c), c) in inference mode, as [`MeshVae::reconstruct_cond`].
@@ -202,18 +200,12 @@ impl Engine {
         x: &Tensor,
         c: Option<&Tensor>,
     ) -> Result<Tensor> {
-        match &mut self.net {
-            Typed::F32(n) => n.reconstruct(model, x, c),
-            Typed::F64(n) => n.reconstruct(model, x, c),
-        }
+        on_net!(&mut self.net, n => n.reconstruct(model, Inputs { x, c }))
     }
 
     /// The largest batch the engine's buffers hold.
     pub fn max_batch(&self) -> usize {
-        match &self.net {
-            Typed::F32(n) => n.max_batch(),
-            Typed::F64(n) => n.max_batch(),
-        }
+        on_net!(&self.net, n => n.max_batch())
     }
 
     /// Adam's update from the gradients of the last [`Self::forward_backward`] plus the L2
@@ -221,18 +213,12 @@ impl Engine {
     /// l2 · Σ ½‖θ‖² of the weights before the update. `adam` must be built on
     /// `model.trainable_vars()`.
     pub fn apply_adam(&self, adam: &mut Adam, l2: f64) -> Result<f64> {
-        let half_sq = match &self.net {
-            Typed::F32(n) => n.apply_adam(adam, l2)?,
-            Typed::F64(n) => n.apply_adam(adam, l2)?,
-        };
+        let half_sq = on_net!(&self.net, n => n.apply_adam(adam, l2)?);
         Ok(half_sq * l2)
     }
 
     /// Copies of the last step's gradients, by variable name (for checks and tests).
     pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
-        match &self.net {
-            Typed::F32(n) => n.gradients(),
-            Typed::F64(n) => n.gradients(),
-        }
+        on_net!(&self.net, n => n.gradients())
     }
 }

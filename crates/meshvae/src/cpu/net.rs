@@ -123,6 +123,14 @@ struct LabelVars {
     count: usize,
 }
 
+/// One batch handed to the network: features x `[B, V, 9]` and, exactly when the model is
+/// conditional, one-hot labels c `[B, L]`.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Inputs<'a> {
+    pub x: &'a Tensor,
+    pub c: Option<&'a Tensor>,
+}
+
 /// Activation buffers, each sized for the largest batch.
 #[derive(Debug)]
 struct Acts<T>(Vec<Vec<T>>);
@@ -245,7 +253,7 @@ impl<T: Real> Net<T> {
     }
 
     /// Checks the inputs' shapes and copies them into the engine's buffers; returns B.
-    fn load_inputs(&mut self, x: &Tensor, c: Option<&Tensor>, eps: &Tensor) -> Result<usize> {
+    fn load_inputs(&mut self, Inputs { x, c }: Inputs<'_>, eps: &Tensor) -> Result<usize> {
         let dims = x.dims();
         let batch = match dims {
             &[b, v, c] if b >= 1 && v == self.v0 && c == FEATURE_CHANNELS => b,
@@ -323,13 +331,11 @@ impl<T: Real> Net<T> {
     pub fn step(
         &mut self,
         model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-        eps: &Tensor,
-        weights: &LossWeights,
+        inputs: Inputs<'_>,
+        (eps, weights): (&Tensor, &LossWeights),
     ) -> Result<StepLoss> {
         self.check_model(model)?;
-        let batch = self.load_inputs(x, c, eps)?;
+        let batch = self.load_inputs(inputs, eps)?;
         let (vars, names) = (self.vars.clone(), self.names.clone());
         let loss = with_weights(&vars, &names, |w| {
             let loss = self.forward(w, batch, weights)?;

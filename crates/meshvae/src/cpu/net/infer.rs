@@ -3,7 +3,7 @@
 //! decoding latent vectors, and reconstructions. None of them disturbs a pending training
 //! step's gradients.
 
-use super::{BnStats, Net, cpu_slice, forward_node, with_weights};
+use super::{BnStats, Inputs, Net, cpu_slice, forward_node, with_weights};
 use crate::candle::model::MeshVae;
 use crate::cpu::kernels as k;
 use crate::cpu::{Real, f64_of};
@@ -18,45 +18,38 @@ impl<T: Real> Net<T> {
     pub fn rec_error(
         &mut self,
         model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-        weights: &LossWeights,
+        inputs: Inputs<'_>,
+        w: &LossWeights,
     ) -> Result<f64> {
-        let batch = self.infer(model, x, c, Pass::Whole)?;
+        let batch = self.infer(model, inputs, Pass::Whole)?;
         let n = self.v0 * FEATURE_CHANNELS * batch;
         // The training loss's kernel; its gradient output goes to the backward work buffer,
         // which a pending step no longer needs.
         let (x_hat, x) = (&self.acts.0[self.x_hat][..n], &self.acts.0[self.x_buf][..n]);
         let sse = k::sse_grad(x_hat, x, &mut self.work[..n], 0.0);
         // Rounded to the model's precision, as candle's path reports it.
-        Ok(weights.rec * f64_of::<T>(crate::cpu::of(sse / batch as f64)))
+        Ok(w.rec * f64_of::<T>(crate::cpu::of(sse / batch as f64)))
     }
 
     /// μ and σ `[B, latent]` of features x `[B, V, 9]` (labels c `[B, L]` for a conditional
     /// model), in the model's dtype.
-    pub fn encode(
-        &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-    ) -> Result<(Tensor, Tensor)> {
-        let batch = self.infer(model, x, c, Pass::Encoder)?;
+    pub fn encode(&mut self, model: &MeshVae, inputs: Inputs<'_>) -> Result<(Tensor, Tensor)> {
+        let batch = self.infer(model, inputs, Pass::Encoder)?;
         let n = batch * self.latent;
         let tensor = |v: &[T]| -> Result<Tensor> {
-            Ok(Tensor::from_slice(v, (batch, self.latent), x.device())?)
+            Ok(Tensor::from_slice(
+                v,
+                (batch, self.latent),
+                inputs.x.device(),
+            )?)
         };
         Ok((tensor(&self.lat.mu[..n])?, tensor(&self.lat.sigma[..n])?))
     }
 
     /// x̂ `[B, V, 9]` = decode(μ(x, c), c).
-    pub fn reconstruct(
-        &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-    ) -> Result<Tensor> {
-        let batch = self.infer(model, x, c, Pass::Whole)?;
-        self.output(batch, x.device())
+    pub fn reconstruct(&mut self, model: &MeshVae, inputs: Inputs<'_>) -> Result<Tensor> {
+        let batch = self.infer(model, inputs, Pass::Whole)?;
+        self.output(batch, inputs.x.device())
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` (labels c `[B, L]` for a conditional
@@ -98,18 +91,13 @@ impl<T: Real> Net<T> {
 
     /// Runs the encoder (and with [`Pass::Whole`] the decoder, z = μ) on x in inference mode;
     /// returns B.
-    fn infer(
-        &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-        pass: Pass,
-    ) -> Result<usize> {
+    fn infer(&mut self, model: &MeshVae, inputs: Inputs<'_>, pass: Pass) -> Result<usize> {
         self.check_model(model)?;
         // ε = 0 makes z = μ.
+        let x = inputs.x;
         let eps = Tensor::zeros((x.dim(0)?, self.latent), x.dtype(), x.device())?;
         let kept = self.keep();
-        let batch = self.load_inputs(x, c, &eps)?;
+        let batch = self.load_inputs(inputs, &eps)?;
         let (vars, names) = (self.vars.clone(), self.names.clone());
         let done = with_weights(&vars, &names, |w| {
             for node in &mut self.enc {
