@@ -332,17 +332,16 @@ impl ChebKernel {
             w: true,
             b: false,
         };
-        let (grad_w, _) = cheb_kernel::backward_into(
-            &self.a,
-            &self.at,
-            Blocks::channel_major(x, d.batch, d.c_in),
-            &refs,
+        let inputs = cheb_kernel::Inputs {
+            a: &self.a,
+            at: &self.at,
+            x: Blocks::channel_major(x, d.batch, d.c_in),
+            terms: &refs,
             w,
-            Blocks::channel_major(g, d.batch, d.c_out),
-            &s,
-            bufs,
-            need,
-        );
+            g: Blocks::channel_major(g, d.batch, d.c_out),
+            s: &s,
+        };
+        let (grad_w, _) = cheb_kernel::backward_into(inputs, bufs, need);
         if let Some(grad_w) = grad_w {
             dw.copy_from_slice(&grad_w);
         }

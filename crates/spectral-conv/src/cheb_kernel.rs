@@ -25,7 +25,7 @@ mod weights;
 use crate::kernel::{Csr, Real};
 use crate::layout::Blocks;
 
-pub(crate) use backward::{Bufs, Need, backward, backward_into};
+pub(crate) use backward::{Bufs, Inputs, Need, backward, backward_into};
 pub(crate) use forward::{forward, mix_terms, stored_terms, stored_terms_into};
 
 /// The sizes of one fused convolution.

@@ -1,6 +1,6 @@
 //! The fused kernels against dense references, in every array layout they take.
 
-use crate::cheb_kernel::{ChebShape, Need, backward, forward};
+use crate::cheb_kernel::{ChebShape, Inputs, Need, backward, forward};
 use crate::kernel::Csr;
 use crate::layout::{Blocks, Io, to_channel_major};
 use crate::test_util::{dense_apply, random_matrix, random_vec};
@@ -117,7 +117,17 @@ fn fused_forward_and_adjoint_match_dense_reference_in_every_layout() {
                 b: true,
             };
             let ws = Workspace::new();
-            let grads_of = |need| backward(&a, &at, xb, &refs(&stored), &w, gb, &s, io, need, &ws);
+            let terms = refs(&stored);
+            let inputs = Inputs {
+                a: &a,
+                at: &at,
+                x: xb,
+                terms: &terms,
+                w: &w,
+                g: gb,
+                s: &s,
+            };
+            let grads_of = |need| backward(inputs, io, need, &ws);
             let grads = grads_of(all);
             let (dx, dw, db) = (grads.dx.unwrap(), grads.dw.unwrap(), grads.db.unwrap());
             let dx = {

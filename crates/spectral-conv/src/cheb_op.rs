@@ -19,7 +19,7 @@ pub(crate) struct ChebOp {
     at: Arc<Csr>,
     k: usize,
     io: Io,
-    ws: Arc<Workspace>,
+    workspace: Arc<Workspace>,
     saved: Mutex<Option<Arc<dyn Any + Send + Sync>>>,
 }
 
@@ -43,13 +43,19 @@ struct Args<'a, T> {
 }
 
 impl ChebOp {
-    pub(crate) fn new(a: Arc<Csr>, at: Arc<Csr>, k: usize, io: Io, ws: Arc<Workspace>) -> Self {
+    pub(crate) fn new(
+        a: Arc<Csr>,
+        at: Arc<Csr>,
+        k: usize,
+        io: Io,
+        workspace: Arc<Workspace>,
+    ) -> Self {
         Self {
             a,
             at,
             k,
             io,
-            ws,
+            workspace,
             saved: Mutex::new(None),
         }
     }
@@ -58,7 +64,7 @@ impl ChebOp {
     fn recycled<T: Real>(&self, bufs: Vec<Vec<T>>) -> Recycled<T> {
         Recycled {
             bufs,
-            home: self.ws.clone(),
+            home: self.workspace.clone(),
         }
     }
 
@@ -112,10 +118,15 @@ impl ChebOp {
         let mut bufs = Vec::new();
         let x_copy = self.io == Io::BatchMajor;
         if x_copy {
-            bufs.push(to_channel_major(x, self.io, (s.batch, s.v, s.ci), &self.ws));
+            bufs.push(to_channel_major(
+                x,
+                self.io,
+                (s.batch, s.v, s.ci),
+                &self.workspace,
+            ));
         }
         let xb = self.x_blocks(x, bufs.first(), s);
-        let terms = cheb_kernel::stored_terms(&self.a, xb, s, &self.ws);
+        let terms = cheb_kernel::stored_terms(&self.a, xb, s, &self.workspace);
         bufs.extend(terms);
         Saved {
             x_copy,
@@ -125,9 +136,10 @@ impl ChebOp {
 
     fn run<T: Real>(&self, args: Args<'_, T>, s: &ChebShape) -> Vec<T> {
         let x_copy = (self.io == Io::BatchMajor)
-            .then(|| to_channel_major(args.x, self.io, (s.batch, s.v, s.ci), &self.ws));
+            .then(|| to_channel_major(args.x, self.io, (s.batch, s.v, s.ci), &self.workspace));
         let xb = self.x_blocks(args.x, x_copy.as_ref(), s);
-        let (y, terms) = cheb_kernel::forward(&self.a, xb, args.w, args.b, s, self.io, &self.ws);
+        let (y, terms) =
+            cheb_kernel::forward(&self.a, xb, args.w, args.b, s, self.io, &self.workspace);
         let mut bufs: Vec<Vec<T>> = x_copy.into_iter().collect();
         let x_copy = !bufs.is_empty();
         bufs.extend(terms);
@@ -212,17 +224,24 @@ impl ChebOp {
         let saved = self.stored(xs, &s);
         let xb = self.x_blocks(xs, saved.x_copy.then(|| &saved.bufs.bufs[0]), &s);
         let g_copy = (self.io == Io::BatchMajor)
-            .then(|| to_channel_major(gs, self.io, (s.batch, s.v, s.co), &self.ws));
+            .then(|| to_channel_major(gs, self.io, (s.batch, s.v, s.co), &self.workspace));
         let gb = match &g_copy {
             Some(c) => Blocks::channel_major(c, s.batch, s.co),
             None => Blocks::new(gs, self.io, s.batch, s.co),
         };
         let terms: Vec<&[T]> = saved.terms().iter().map(|t| t.as_slice()).collect();
-        let grads = cheb_kernel::backward(
-            &self.a, &self.at, xb, &terms, ws, gb, &s, self.io, need, &self.ws,
-        );
+        let inputs = cheb_kernel::Inputs {
+            a: &self.a,
+            at: &self.at,
+            x: xb,
+            terms: &terms,
+            w: ws,
+            g: gb,
+            s: &s,
+        };
+        let grads = cheb_kernel::backward(inputs, self.io, need, &self.workspace);
         if let Some(c) = g_copy {
-            self.ws.give(c);
+            self.workspace.give(c);
         }
         let dx = grads
             .dx

@@ -25,20 +25,27 @@ pub(crate) struct Need {
     pub b: bool,
 }
 
-/// Backward: given the output gradient `g`, x and the forward's stored terms.
-#[allow(clippy::too_many_arguments)]
+/// What the backward pass reads: A and its stored transpose, x, the forward's stored terms
+/// T_1 … T_{K−2}, W, the output gradient g and the sizes.
+#[derive(Clone, Copy)]
+pub(crate) struct Inputs<'a, T> {
+    pub a: &'a Csr,
+    pub at: &'a Csr,
+    pub x: Blocks<'a, T>,
+    pub terms: &'a [&'a [T]],
+    pub w: &'a [T],
+    pub g: Blocks<'a, T>,
+    pub s: &'a ChebShape,
+}
+
+/// Backward into fresh vectors (dx in layout `io`).
 pub(crate) fn backward<T: Real>(
-    a: &Csr,
-    at: &Csr,
-    x: Blocks<'_, T>,
-    terms: &[&[T]],
-    w: &[T],
-    g: Blocks<'_, T>,
-    s: &ChebShape,
+    inp: Inputs<'_, T>,
     io: Io,
     need: Need,
     ws: &Workspace,
 ) -> Grads<T> {
+    let s = inp.s;
     let size = s.batch * s.v * s.ci;
     let mut dx = need.x.then(|| vec![T::ZERO; size]);
     // Sweep 1 writes b_{K−2} into a recycled buffer (K ≥ 3) or, for K ≤ 2, dx itself.
@@ -48,7 +55,7 @@ pub(crate) fn backward<T: Real>(
         work: work.as_deref_mut(),
         ws,
     };
-    let (dw, db) = backward_into(a, at, x, terms, w, g, s, bufs, need);
+    let (dw, db) = backward_into(inp, bufs, need);
     if let Some(work) = work {
         ws.give(work);
     }
@@ -67,18 +74,20 @@ pub(crate) struct Bufs<'a, T> {
 /// The backward pass into given buffers: dx (if `bufs.dx`), and returns dW `[ci·K, co]` and db
 /// as asked by `need` (`need.x` is ignored: dx is computed iff a buffer is given). Clenshaw's
 /// b_{K−2} … b_1 go to `bufs.work`; the sweeps' staging comes from `bufs.ws`.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn backward_into<T: Real>(
-    a: &Csr,
-    at: &Csr,
-    x: Blocks<'_, T>,
-    terms: &[&[T]],
-    w: &[T],
-    g: Blocks<'_, T>,
-    s: &ChebShape,
+    inp: Inputs<'_, T>,
     bufs: Bufs<'_, T>,
     need: Need,
 ) -> (Option<Vec<T>>, Option<Vec<T>>) {
+    let Inputs {
+        a,
+        at,
+        x,
+        terms,
+        w,
+        g,
+        s,
+    } = inp;
     let k = s.k;
     let size = s.batch * s.v * s.ci;
     let n_w = k * s.ci * s.co;
