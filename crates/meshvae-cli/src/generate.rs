@@ -52,6 +52,10 @@ pub fn model_and_set_selected(
     select_on_test: bool,
 ) -> Result<(TrainedModel, MeshSet), CliError> {
     let trained = TrainedModel::load_selected(model, &Device::Cpu, select_on_test)?;
+    let executor = trained.inference_executor();
+    if executor.reason.is_some() {
+        eprintln!("note: the network runs on {executor}");
+    }
     let path = match set {
         Some(p) => p.clone(),
         None => trained.spec.source.clone().ok_or_else(|| {

@@ -389,3 +389,55 @@ fn temporaries(dir: &std::path::Path) -> Vec<String> {
         })
         .unwrap_or_default()
 }
+
+#[test]
+fn a_model_the_engine_does_not_cover_says_so_in_training_and_in_eval() {
+    let dir = scratch("train-k9");
+    let set = dir.join("set");
+    let model = dir.join("model");
+    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "3"]));
+    let trained = ok(&meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&model),
+        "--epochs",
+        "1",
+        "--batch",
+        "4",
+        "--latent",
+        "8",
+        "--k",
+        "9",
+        "--quiet",
+    ]));
+    let why = "candle (the engine does not cover K = 9 (at most 8))";
+    assert!(
+        trained.contains(&format!("steps computed by: {why}")),
+        "{trained}"
+    );
+    let eval = meshvae(&["eval", s(&model)]);
+    assert!(eval.status.success());
+    let stderr = String::from_utf8_lossy(&eval.stderr);
+    assert!(
+        stderr.contains(&format!("note: the network runs on {why}")),
+        "{stderr}"
+    );
+    // A model the engine covers prints no such note.
+    let covered = dir.join("covered");
+    ok(&meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&covered),
+        "--epochs",
+        "1",
+        "--batch",
+        "4",
+        "--latent",
+        "8",
+        "--quiet",
+    ]));
+    let eval = meshvae(&["eval", s(&covered)]);
+    assert!(!String::from_utf8_lossy(&eval.stderr).contains("runs on"));
+}

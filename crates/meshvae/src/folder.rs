@@ -8,6 +8,7 @@ use crate::cpu::Engine;
 use crate::error::{Result, VaeError};
 use crate::train::folder::{ModelFolder, ModelSpec, SplitFile};
 use crate::train::split::{Selection, Split};
+use crate::train::{Executor, ExecutorKind};
 use candle_core::Device;
 use candle_core::Tensor;
 use deform_features::Normalization;
@@ -129,6 +130,13 @@ impl TrainedModel {
         self.spec.labels.as_deref()
     }
 
+    /// What encodes and decodes for the applications ([`Self::reconstruct_batch`],
+    /// [`Self::encode_mu`], [`Self::decode_batch`]): the CPU engine where it covers the model,
+    /// else candle's model, with the reason (the CLI prints it).
+    pub fn inference_executor(&self) -> Executor {
+        Executor::choose(&self.model, true)
+    }
+
     /// The one-hot labels `[B, L]` of the meshes `ids` of the model's set for a conditional
     /// model, `None` for an unconditional one: what `MeshVae::encode_cond` and friends take.
     ///
@@ -196,7 +204,7 @@ impl TrainedModel {
         batch: usize,
         f: impl FnOnce(&mut Engine, &MeshVae) -> Result<R>,
     ) -> Option<Result<R>> {
-        if Engine::unsupported(&self.model).is_some() {
+        if self.inference_executor().kind != ExecutorKind::Engine {
             return None;
         }
         let mut slot = self.engine.lock().unwrap_or_else(|p| p.into_inner());
