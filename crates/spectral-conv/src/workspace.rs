@@ -60,6 +60,13 @@ impl Workspace {
         self.f32.kept_bytes() + self.f64.kept_bytes()
     }
 
+    /// Large buffers kept, both float types (staging sets not counted: how many rayon starts
+    /// varies from call to call).
+    #[cfg(test)]
+    pub(crate) fn large_count(&self) -> usize {
+        self.f32.large_count() + self.f64.large_count()
+    }
+
     pub(crate) fn pools<T: Real>(&self) -> &Pools<T> {
         T::pools(&self.f32, &self.f64)
     }
@@ -106,6 +113,11 @@ impl Workspace {
 }
 
 impl<T> Pools<T> {
+    #[cfg(test)]
+    fn large_count(&self) -> usize {
+        self.large.lock().map(|p| p.len()).unwrap_or(0)
+    }
+
     fn clear(&self) {
         if let Ok(mut pool) = self.large.lock() {
             pool.clear();
