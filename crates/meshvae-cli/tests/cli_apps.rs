@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{fails_with, meshvae, ok, s, scratch};
+use common::{fails_with, meshvae, ok, s, synth_case};
 use std::path::Path;
 
 /// Decodes a PNG and returns its size; fails the test when it does not decode.
@@ -31,10 +31,7 @@ fn files(dir: &Path, ext: &str) -> Vec<String> {
 
 #[test]
 fn generate_interpolate_embed_on_a_synthetic_set() {
-    let dir = scratch("apps");
-    let set = dir.join("set");
-    let model = dir.join("model");
-    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "4"]));
+    let (dir, set, model) = synth_case("apps", 4);
     ok(&meshvae(&[
         "train",
         s(&set),

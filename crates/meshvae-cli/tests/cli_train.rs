@@ -2,14 +2,11 @@
 
 mod common;
 
-use common::{fails_with, meshvae, ok, s, scratch};
+use common::{fails_with, meshvae, ok, s, synth_case, train_short};
 
 #[test]
 fn train_eval_reconstruct_on_a_synthetic_set() {
-    let dir = scratch("train");
-    let set = dir.join("set");
-    let model = dir.join("model");
-    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "4"]));
+    let (dir, set, model) = synth_case("train", 4);
     let train = |extra: &[&str]| {
         let mut args = vec![
             "train",
@@ -70,21 +67,7 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     fails_with(&resume(&["--split-by-mesh"]), 1, "cannot resume");
     // One epoch into a new folder, with `extra` options.
     let one_epoch = |out: &std::path::Path, extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            s(&set),
-            "--out",
-            s(out),
-            "--epochs",
-            "1",
-            "--batch",
-            "4",
-            "--latent",
-            "16",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        ok(&meshvae(&args));
+        ok(&train_short(&set, out, 1, extra));
     };
     let by_mesh = dir.join("by-mesh");
     one_epoch(&by_mesh, &["--split-by-mesh"]);
@@ -297,10 +280,7 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
 #[test]
 fn killed_runs_leave_no_temporary_files_and_readable_folders() {
     use std::process::{Command, Stdio};
-    let dir = scratch("kill");
-    let set = dir.join("set");
-    let model = dir.join("model");
-    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "3"]));
+    let (dir, set, model) = synth_case("kill", 3);
     let args = |resume: bool, epochs: &str| -> Vec<String> {
         let mut a = vec![
             "train",
@@ -392,25 +372,9 @@ fn temporaries(dir: &std::path::Path) -> Vec<String> {
 
 #[test]
 fn a_model_the_engine_does_not_cover_says_so_in_training_and_in_eval() {
-    let dir = scratch("train-k9");
-    let set = dir.join("set");
-    let model = dir.join("model");
-    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", "3"]));
-    let trained = ok(&meshvae(&[
-        "train",
-        s(&set),
-        "--out",
-        s(&model),
-        "--epochs",
-        "1",
-        "--batch",
-        "4",
-        "--latent",
-        "8",
-        "--k",
-        "9",
-        "--quiet",
-    ]));
+    let (dir, set, model) = synth_case("train-k9", 3);
+    let train = |out: &std::path::Path, extra: &[&str]| ok(&train_short(&set, out, 1, extra));
+    let trained = train(&model, &["--k", "9"]);
     let why = "candle (the engine does not cover K = 9 (at most 8))";
     assert!(
         trained.contains(&format!("steps computed by: {why}")),
@@ -425,19 +389,7 @@ fn a_model_the_engine_does_not_cover_says_so_in_training_and_in_eval() {
     );
     // A model the engine covers prints no such note.
     let covered = dir.join("covered");
-    ok(&meshvae(&[
-        "train",
-        s(&set),
-        "--out",
-        s(&covered),
-        "--epochs",
-        "1",
-        "--batch",
-        "4",
-        "--latent",
-        "8",
-        "--quiet",
-    ]));
+    train(&covered, &[]);
     let eval = meshvae(&["eval", s(&covered)]);
     assert!(!String::from_utf8_lossy(&eval.stderr).contains("runs on"));
 }

@@ -21,6 +21,35 @@ pub fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// A scratch folder `name` with a synthetic set of `per_label` meshes per label in `set/`:
+/// (the folder, the set, `model/` beside it, not created).
+pub fn synth_case(name: &str, per_label: usize) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = scratch(name);
+    let (set, model) = (dir.join("set"), dir.join("model"));
+    let n = per_label.to_string();
+    ok(&meshvae(&["synth", "--out", s(&set), "--per-label", &n]));
+    (dir, set, model)
+}
+
+/// `meshvae train SET --out OUT --epochs N --batch 4 --latent 16 --quiet EXTRA…`: a short run
+/// on a small set.
+pub fn train_short(set: &Path, out: &Path, epochs: usize, extra: &[&str]) -> Output {
+    let n = epochs.to_string();
+    let mut args = vec![
+        "train",
+        s(set),
+        "--out",
+        s(out),
+        "--epochs",
+        &n,
+        "--batch",
+        "4",
+    ];
+    args.extend_from_slice(&["--latent", "16", "--quiet"]);
+    args.extend_from_slice(extra);
+    meshvae(&args)
+}
+
 /// The command's stdout; fails the test (showing stderr) when it did not succeed.
 pub fn ok(out: &Output) -> String {
     let err = String::from_utf8_lossy(&out.stderr);
