@@ -26,10 +26,12 @@ const MIN_LEN: usize = 1 << 16;
 /// Staging sets kept per float type (a few per thread).
 const STAGING_KEEP: usize = 16;
 
-/// Scratch memory for the CPU kernels, reused between calls (see the module documentation of
-/// `workspace.rs` in the sources: large intermediates and per-task staging buffers, per float
-/// type). Safe to share between threads; contents are never read before being overwritten, so
-/// one workspace may serve any number of layers and calls.
+/// Scratch memory for the CPU kernels, reused between calls: up to 8 large intermediates per
+/// float type (channel-major copies, stored Chebyshev terms, Clenshaw terms; a fresh 49 MB
+/// buffer would otherwise be page-faulted and zeroed on every call) and the per-task staging
+/// buffers of the parallel sweeps. Safe to share between threads; contents are never read
+/// before being overwritten, so one workspace may serve any number of layers and calls.
+/// Dropping it, or [`Workspace::clear`], frees the memory.
 #[derive(Debug, Default)]
 pub struct Workspace {
     f32: Pools<f32>,

@@ -48,7 +48,7 @@ pub(crate) fn backward<T: Real>(
     let s = inp.s;
     let size = s.batch * s.v * s.ci;
     let mut dx = need.x.then(|| vec![T::ZERO; size]);
-    // Sweep 1 writes b_{K−2} into a recycled buffer (K ≥ 3) or, for K ≤ 2, dx itself.
+    // Sweep 1 writes b_{K−2} into a buffer of the workspace (K ≥ 3) or, for K ≤ 2, dx itself.
     let mut work = (need.x && s.k >= 3).then(|| ws.take((s.k - 2) * size));
     let bufs = Bufs {
         dx: dx.as_deref_mut().map(|d| (io, d)),
