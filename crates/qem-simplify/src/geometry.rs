@@ -61,15 +61,6 @@ pub(crate) fn to_f64(p: [f32; 3]) -> Vec3 {
     p.map(f64::from)
 }
 
-/// Squared distance from `p` to the closest point of triangle (a, b, c), degenerate triangles
-/// included (they reduce to a segment or a point). Region tests on the barycentric
-/// coordinates of the projection (the classical Voronoi-region walk).
-pub(crate) fn point_triangle_distance_squared(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f64 {
-    let closest = closest_point_on_triangle(p, a, b, c);
-    let d = sub(p, closest);
-    dot(d, d)
-}
-
 /// The closest point of triangle (a, b, c) to `p`, by the Voronoi regions of the corners and
 /// sides; a degenerate triangle (segment, point) gives the nearest point of its three sides.
 pub(crate) fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
@@ -148,6 +139,11 @@ mod tests {
             }
         }
         best
+    }
+
+    fn point_triangle_distance_squared(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f64 {
+        let d = sub(p, closest_point_on_triangle(p, a, b, c));
+        dot(d, d)
     }
 
     #[test]

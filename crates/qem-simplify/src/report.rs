@@ -3,8 +3,8 @@
 //! prints.
 
 use crate::geometry::{area_vector, dot, to_f64};
-use crate::grid::TriangleGrid;
 use crate::manifold::manifold_defect;
+use crate::nearest::NearestGrid;
 use crate::remesh::{Remeshed, flipped_faces_on_surface};
 use crate::simplify::Simplified;
 use mesh_io::{Face, Point, QualityReport, TriMesh};
@@ -139,12 +139,13 @@ pub fn geometric_error_rel(fine: &TriMesh, coarse: &TriMesh) -> f64 {
         .iter()
         .map(|f| f.map(|v| to_f64(coarse.positions[v as usize])))
         .collect();
-    let grid = TriangleGrid::new(triangles, &points);
-    let mut seen = vec![0u32; grid.triangle_count()];
+    let grid = NearestGrid::new(triangles, (0..coarse.faces.len() as u32).collect());
     let sum: f64 = points
         .iter()
-        .enumerate()
-        .map(|(k, &p)| grid.nearest_squared(p, &mut seen, k as u32 + 1))
+        .map(|&p| {
+            grid.closest(p, |_| true)
+                .map_or(0.0, |c| c.distance_squared)
+        })
         .sum();
     (sum / points.len() as f64).sqrt() / diagonal
 }

@@ -11,10 +11,10 @@
 //! vertex nearest to any of its vertices, flooded from that vertex: the result stays a
 //! partition.
 
-use super::nearest::NearestGrid;
 use super::surface::NONE;
 use crate::error::{Result, SimplifyError};
 use crate::geometry::{Vec3, distance};
+use crate::nearest::NearestGrid;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 

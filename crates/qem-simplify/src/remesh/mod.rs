@@ -5,7 +5,6 @@ mod cluster;
 mod editable;
 #[cfg(test)]
 mod editable_tests;
-mod nearest;
 mod passes;
 mod repair;
 mod surface;

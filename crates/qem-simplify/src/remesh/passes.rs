@@ -531,7 +531,7 @@ mod tests {
                 .iter()
                 .map(|f| {
                     let [a, b, c] = f.map(|v| to_f64(sphere.positions[v as usize]));
-                    distance(p, super::super::nearest::closest_on_triangle(p, a, b, c))
+                    distance(p, crate::nearest::closest_on_triangle(p, a, b, c))
                 })
                 .fold(f64::INFINITY, f64::min)
         };

@@ -1,8 +1,8 @@
 //! The template as the surface the remesher projects onto: its triangles by connected
 //! component, its boundary loops as polylines, and the test of a face against it.
 
-use super::nearest::{Closest, NearestGrid};
 use crate::geometry::{Vec3, add, area_vector, distance, dot, norm, scale, to_f64};
+use crate::nearest::{Closest, NearestGrid};
 use mesh_io::{Face, TriMesh};
 
 /// How far beyond the closest template point, in units of a face's longest edge, a template
