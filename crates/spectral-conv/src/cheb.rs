@@ -10,6 +10,7 @@
 
 use crate::cheb_kernel::MAX_K;
 use crate::cheb_op::ChebOp;
+use crate::check;
 use crate::error::{ConvError, Result};
 use crate::layout::Io;
 use crate::spmm::{SparseOp, use_kernel};
@@ -87,17 +88,7 @@ impl ChebConv {
         bias: Option<Tensor>,
     ) -> Result<Self> {
         const OP: &str = "ChebConv::from_weights";
-        if laplacian.rows() != laplacian.cols() {
-            return Err(ConvError::argument(
-                OP,
-                "laplacian",
-                format!(
-                    "must be square, is {}x{}",
-                    laplacian.rows(),
-                    laplacian.cols()
-                ),
-            ));
-        }
+        check::square(OP, "laplacian", laplacian.rows(), laplacian.cols())?;
         if k == 0 {
             return Err(ConvError::argument(OP, "k", "needs at least one term"));
         }
@@ -111,15 +102,7 @@ impl ChebConv {
                 format!("shape {:?} is not [C_in·{k}, C_out]", weight.dims()),
             ));
         }
-        if let Some(b) = &bias
-            && b.dims() != [c_out]
-        {
-            return Err(ConvError::argument(
-                OP,
-                "bias",
-                format!("shape {:?}, expected [{c_out}]", b.dims()),
-            ));
-        }
+        check::bias(OP, bias.as_ref(), c_out)?;
         Ok(Self {
             laplacian,
             weight,
@@ -509,7 +492,21 @@ mod tests {
         ));
         let rect = SparseOp::new(&random_matrix(3, 4, 0.5, 1), &Device::Cpu).unwrap();
         let w = tensor(vec![0.0; 6], &[3, 2]);
-        assert!(ChebConv::from_weights(rect, 3, w, None).is_err());
+        let err = ChebConv::from_weights(rect, 3, w.clone(), None).unwrap_err();
+        assert!(matches!(
+            err,
+            ConvError::Argument {
+                arg: "laplacian",
+                ..
+            }
+        ));
+        assert!(err.to_string().contains("must be square, is 3x4"), "{err}");
+        let b3 = tensor(vec![0.0; 3], &[3]);
+        let err = ChebConv::from_weights(op.clone(), 3, w, Some(b3)).unwrap_err();
+        assert!(
+            err.to_string().contains("`bias`: shape [3], expected [2]"),
+            "{err}"
+        );
         let x = Tensor::zeros((2, 9, 8), DType::F32, &Device::Cpu).unwrap();
         let err = conv.forward(&x).unwrap_err().to_string();
         assert!(err.contains("expects 9 channels"), "{err}");

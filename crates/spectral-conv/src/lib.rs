@@ -74,6 +74,7 @@ mod cheb_kernel;
 #[cfg(test)]
 mod cheb_kernel_tests;
 mod cheb_op;
+mod check;
 mod error;
 mod kernel;
 mod layout;

@@ -8,6 +8,7 @@
 //! [`locality_order`] (once, before building the hierarchy and the features) keeps neighbours
 //! within a narrow band of indices.
 
+use crate::check;
 use crate::error::{ConvError, Result};
 use sparse_csr::CsrMatrix;
 use std::collections::VecDeque;
@@ -17,13 +18,7 @@ use std::collections::VecDeque;
 /// pseudo-peripheral vertex (the end of a breadth-first search from a vertex of least degree).
 pub fn locality_order(pattern: &CsrMatrix) -> Result<Vec<u32>> {
     let n = pattern.rows();
-    if pattern.cols() != n {
-        return Err(ConvError::argument(
-            "locality_order",
-            "pattern",
-            format!("must be square, is {}x{}", n, pattern.cols()),
-        ));
-    }
+    check::square("locality_order", "pattern", n, pattern.cols())?;
     Ok(rcm(n, |r| pattern.row(r).0))
 }
 
@@ -107,13 +102,7 @@ fn bfs(
 pub fn permute_symmetric(matrix: &CsrMatrix, order: &[u32]) -> Result<CsrMatrix> {
     let n = matrix.rows();
     let position = inverse_order(order, n)?;
-    if matrix.cols() != n {
-        return Err(ConvError::argument(
-            "permute_symmetric",
-            "matrix",
-            format!("must be square, is {}x{}", n, matrix.cols()),
-        ));
-    }
+    check::square("permute_symmetric", "matrix", n, matrix.cols())?;
     let mut triplets = Vec::with_capacity(matrix.nnz());
     for r in 0..n {
         let (cols, vals) = matrix.row(r);

@@ -4,6 +4,7 @@
 //! The neighbour mean is a [`SparseOp`] of D⁻¹A (see [`neighbour_mean_matrix`]), so it shares the
 //! kernel/fallback machinery (and gradients) of every other sparse product.
 
+use crate::check;
 use crate::error::{ConvError, Result};
 use crate::spmm::SparseOp;
 use candle_core::Tensor;
@@ -15,17 +16,7 @@ use sparse_csr::CsrMatrix;
 /// i.e. a neighbour mean of 0.
 pub fn neighbour_mean_matrix(adjacency: &CsrMatrix) -> Result<CsrMatrix> {
     const OP: &str = "neighbour_mean_matrix";
-    if adjacency.rows() != adjacency.cols() {
-        return Err(ConvError::argument(
-            OP,
-            "adjacency",
-            format!(
-                "must be square, is {}x{}",
-                adjacency.rows(),
-                adjacency.cols()
-            ),
-        ));
-    }
+    check::square(OP, "adjacency", adjacency.rows(), adjacency.cols())?;
     let mut triplets = Vec::with_capacity(adjacency.nnz());
     for r in 0..adjacency.rows() {
         let neighbours: Vec<u32> = adjacency
@@ -108,17 +99,12 @@ impl SpatialConv {
         bias: Option<Tensor>,
     ) -> Result<Self> {
         const OP: &str = "SpatialConv::from_weights";
-        if neighbour_mean.rows() != neighbour_mean.cols() {
-            return Err(ConvError::argument(
-                OP,
-                "neighbour_mean",
-                format!(
-                    "must be square, is {}x{}",
-                    neighbour_mean.rows(),
-                    neighbour_mean.cols()
-                ),
-            ));
-        }
+        check::square(
+            OP,
+            "neighbour_mean",
+            neighbour_mean.rows(),
+            neighbour_mean.cols(),
+        )?;
         if w_self.rank() != 2 || w_self.dims() != w_nb.dims() {
             return Err(ConvError::argument(
                 OP,
@@ -131,15 +117,7 @@ impl SpatialConv {
             ));
         }
         let c_out = w_self.dims()[1];
-        if let Some(b) = &bias
-            && b.dims() != [c_out]
-        {
-            return Err(ConvError::argument(
-                OP,
-                "bias",
-                format!("shape {:?}, expected [{c_out}]", b.dims()),
-            ));
-        }
+        check::bias(OP, bias.as_ref(), c_out)?;
         Ok(Self {
             neighbour_mean,
             w_self,
@@ -165,16 +143,12 @@ impl SpatialConv {
         &self.neighbour_mean
     }
 
-    /// y `[V, B, C_out]` from x `[V, B, C_in]` (or `[V, C_in]` → `[V, C_out]`): the vertex-major
-    /// layout; channel last, so both products are one matmul over the V·B rows.
-    pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
-        const OP: &str = "SpatialConv::forward_vertex_major";
-        let (_, flat) = self.neighbour_mean.vertex_major_rows(OP, x)?;
+    /// The output channel count, once `x` (with `c_in` channels) is known to suit the weights.
+    fn check_channels(&self, op: &'static str, x: &Tensor, c_in: usize) -> Result<usize> {
         let (w_in, c_out) = self.w_self.dims2()?;
-        let c_in = x.dims().last().copied().unwrap_or(0);
         if c_in != w_in || x.dtype() != self.w_self.dtype() {
             return Err(ConvError::input(
-                OP,
+                op,
                 format!(
                     "input {:?} of {:?}; the layer expects {w_in} channels of {:?}",
                     x.dims(),
@@ -183,6 +157,16 @@ impl SpatialConv {
                 ),
             ));
         }
+        Ok(c_out)
+    }
+
+    /// y `[V, B, C_out]` from x `[V, B, C_in]` (or `[V, C_in]` → `[V, C_out]`): the vertex-major
+    /// layout; channel last, so both products are one matmul over the V·B rows.
+    pub fn forward_vertex_major(&self, x: &Tensor) -> Result<Tensor> {
+        const OP: &str = "SpatialConv::forward_vertex_major";
+        let (_, flat) = self.neighbour_mean.vertex_major_rows(OP, x)?;
+        let c_in = x.dims().last().copied().unwrap_or(0);
+        let c_out = self.check_channels(OP, x, c_in)?;
         let rows = flat.elem_count() / c_in;
         let mean = self.neighbour_mean.apply(&flat)?;
         let flat2 = |t: &Tensor| t.reshape((rows, c_in));
@@ -203,18 +187,7 @@ impl SpatialConv {
         const OP: &str = "SpatialConv::forward";
         let (x3, squeeze) = self.neighbour_mean.check_input(OP, x)?;
         let (batch, v, c_in) = x3.dims3()?;
-        let (w_in, c_out) = self.w_self.dims2()?;
-        if c_in != w_in || x.dtype() != self.w_self.dtype() {
-            return Err(ConvError::input(
-                OP,
-                format!(
-                    "input {:?} of {:?}; the layer expects {w_in} channels of {:?}",
-                    x.dims(),
-                    x.dtype(),
-                    self.w_self.dtype()
-                ),
-            ));
-        }
+        let c_out = self.check_channels(OP, x, c_in)?;
         let mean = self.neighbour_mean.apply(&x3)?;
         let flat = |t: &Tensor| t.reshape((batch * v, c_in));
         let y = (flat(&x3)?.matmul(&self.w_self)? + flat(&mean)?.matmul(&self.w_nb)?)?
@@ -306,5 +279,27 @@ mod tests {
         assert_eq!(y.dims(), &[2, 9, 5]);
         let wrong = Tensor::ones((2, 9, 4), DType::F32, &Device::Cpu).unwrap();
         assert!(matches!(conv.forward(&wrong), Err(ConvError::Input { .. })));
+        let wrong_vm = Tensor::ones((9, 2, 4), DType::F32, &Device::Cpu).unwrap();
+        let err = conv
+            .forward_vertex_major(&wrong_vm)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("expects 9 channels of F32"), "{err}");
+        let rect = CsrMatrix::from_triplets(2, 3, &[(0, 1, 1.0)]).unwrap();
+        let err = neighbour_mean_matrix(&rect).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("`adjacency`: must be square, is 2x3"),
+            "{err}"
+        );
+        let w = conv.w_self().clone();
+        let wrong_bias = Tensor::zeros(4, DType::F32, &Device::Cpu).unwrap();
+        let err = SpatialConv::from_weights(
+            conv.neighbour_mean().clone(),
+            w.clone(),
+            w,
+            Some(wrong_bias),
+        );
+        assert!(err.unwrap_err().to_string().contains("expected [5]"));
     }
 }
