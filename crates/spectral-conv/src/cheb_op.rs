@@ -3,14 +3,17 @@
 //! `cheb_kernel.rs` on the CPU storage directly, for x in `[B, V, C_in]` or `[V, B, C_in]`.
 
 use crate::cheb_kernel::{self, ChebShape, Need};
+use crate::custom_op::{contiguous_span, cpu_slice};
 use crate::kernel::{Csr, Real};
 use crate::layout::{Blocks, Io, to_channel_major};
-use crate::spmm::contiguous_span;
 use crate::workspace::{Recycled, Workspace};
 use candle_core::backend::BackendStorage;
-use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Storage, Tensor, WithDType};
+use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Shape, Tensor, WithDType};
 use std::any::Any;
 use std::sync::{Arc, Mutex};
+
+/// The op's name in candle and in error messages.
+const NAME: &str = "cheb-conv";
 
 /// The fused op. The forward pass keeps its stored terms (and, for `[B, V, C]` input, the
 /// channel-major copy of x) for the backward pass; they are recomputed if missing.
@@ -160,10 +163,10 @@ impl ChebOp {
         bias: Option<(&CpuStorage, &Layout)>,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let s = self.shape(xl.dims(), wl.dims())?;
-        let (xa, xb) = contiguous_span("cheb-conv", xl)?;
-        let (wa, wb) = contiguous_span("cheb-conv", wl)?;
+        let (xa, xb) = contiguous_span(NAME, xl)?;
+        let (wa, wb) = contiguous_span(NAME, wl)?;
         let b_span = match bias {
-            Some((_, bl)) if bl.dims() == [s.co] => Some(contiguous_span("cheb-conv", bl)?),
+            Some((_, bl)) if bl.dims() == [s.co] => Some(contiguous_span(NAME, bl)?),
             Some((_, bl)) => candle_core::bail!("cheb-conv: bias of shape {:?}", bl.dims()),
             None => None,
         };
@@ -214,9 +217,9 @@ impl ChebOp {
         let (g_store, g_layout) = g.storage_and_layout();
         let s = self.shape(x_layout.dims(), w_layout.dims())?;
         let (xs, ws, gs) = (
-            cpu_slice::<T>(&x_store, x_layout)?,
-            cpu_slice::<T>(&w_store, w_layout)?,
-            cpu_slice::<T>(&g_store, g_layout)?,
+            cpu_slice::<T>(NAME, &x_store, x_layout)?,
+            cpu_slice::<T>(NAME, &w_store, w_layout)?,
+            cpu_slice::<T>(NAME, &g_store, g_layout)?,
         );
         if g_layout.shape() != &self.out_shape(&s) {
             candle_core::bail!("cheb-conv: gradient of shape {:?}", g_layout.dims());
@@ -282,21 +285,9 @@ impl ChebOp {
     }
 }
 
-/// The contiguous data of a CPU tensor of dtype `T`.
-fn cpu_slice<'a, T: WithDType>(
-    storage: &'a Storage,
-    layout: &Layout,
-) -> candle_core::Result<&'a [T]> {
-    let Storage::Cpu(cpu) = storage else {
-        candle_core::bail!("cheb-conv: the backward pass expects CPU tensors");
-    };
-    let (lo, hi) = contiguous_span("cheb-conv", layout)?;
-    Ok(&T::cpu_storage_as_slice(cpu)?[lo..hi])
-}
-
 impl CustomOp2 for ChebOp {
     fn name(&self) -> &'static str {
-        "cheb-conv"
+        NAME
     }
 
     fn cpu_fwd(

@@ -75,6 +75,7 @@ mod cheb_kernel;
 mod cheb_kernel_tests;
 mod cheb_op;
 mod check;
+mod custom_op;
 mod error;
 mod kernel;
 mod layout;

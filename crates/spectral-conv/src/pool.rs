@@ -12,13 +12,13 @@
 //! members for its backward pass, with a candle-ops fallback for other devices.
 
 use crate::buffers::MaxKernel;
+use crate::custom_op::{self, SliceOp, cpu_slice};
 use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real};
 use crate::max_kernel::{MaxMode, max_pool, max_unpool};
-use crate::spmm::{Backend, SparseOp, contiguous_span, use_kernel};
+use crate::spmm::{Backend, SparseOp, use_kernel};
 use crate::workspace::Workspace;
-use candle_core::backend::BackendStorage;
-use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Storage, Tensor};
+use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Tensor, WithDType};
 use sparse_csr::CsrMatrix;
 use std::sync::{Arc, Mutex};
 
@@ -278,7 +278,12 @@ struct MaxPoolOp {
 }
 
 impl MaxPoolOp {
-    fn run<T: Real>(&self, x: &[T], dims: &[usize]) -> candle_core::Result<(Vec<T>, Shape)> {
+    /// The pooled values and the selected members for input `x` of shape `dims`.
+    fn select<T: Real>(
+        &self,
+        x: &[T],
+        dims: &[usize],
+    ) -> candle_core::Result<(Vec<T>, Vec<u32>, Shape)> {
         let &[batch, v, c] = dims else {
             candle_core::bail!("max-pool: expected a rank-3 input, got {dims:?}");
         };
@@ -298,47 +303,26 @@ impl MaxPoolOp {
             c,
             self.kernel.mode(),
         );
-        if let Ok(mut saved) = self.arg.lock() {
-            *saved = Some(Arc::new(arg));
-        }
-        Ok((y, Shape::from((batch, self.kernel.pattern().rows(), c))))
+        Ok((
+            y,
+            arg,
+            Shape::from((batch, self.kernel.pattern().rows(), c)),
+        ))
     }
 
-    fn unpool<T: Real + candle_core::WithDType>(
-        &self,
-        x: &Tensor,
-        g: &Tensor,
-    ) -> candle_core::Result<Tensor> {
+    fn unpool<T: Real + WithDType>(&self, x: &Tensor, g: &Tensor) -> candle_core::Result<Tensor> {
         let (batch, v, c) = x.dims3()?;
         let arg = match self.arg.lock().ok().and_then(|a| a.clone()) {
             Some(arg) => arg,
             None => {
                 // Not recorded (should not happen): select again from x.
                 let (store, layout) = x.storage_and_layout();
-                let Storage::Cpu(cpu) = &*store else {
-                    candle_core::bail!("max-pool: the backward pass expects CPU tensors");
-                };
-                let (lo, hi) = contiguous_span("max-pool", layout)?;
-                let xs = &T::cpu_storage_as_slice(cpu)?[lo..hi];
-                let n = batch * self.kernel.pattern().rows() * c;
-                let (mut y, mut arg) = (vec![T::ZERO; n], vec![0u32; n]);
-                max_pool(
-                    self.kernel.pattern(),
-                    xs,
-                    &mut y,
-                    &mut arg,
-                    c,
-                    self.kernel.mode(),
-                );
-                Arc::new(arg)
+                let xs = cpu_slice::<T>(Self::NAME, &store, layout)?;
+                Arc::new(self.select(xs, layout.dims())?.1)
             }
         };
         let (store, layout) = g.storage_and_layout();
-        let Storage::Cpu(cpu) = &*store else {
-            candle_core::bail!("max-pool: the backward pass expects CPU tensors");
-        };
-        let (lo, hi) = contiguous_span("max-pool", layout)?;
-        let gs = &T::cpu_storage_as_slice(cpu)?[lo..hi];
+        let gs = cpu_slice::<T>(Self::NAME, &store, layout)?;
         if gs.len() != arg.len() {
             candle_core::bail!("max-pool: gradient of shape {:?}", layout.dims());
         }
@@ -348,24 +332,25 @@ impl MaxPoolOp {
     }
 }
 
+impl SliceOp for MaxPoolOp {
+    const NAME: &'static str = "max-pool";
+
+    fn run<T: Real>(&self, x: &[T], dims: &[usize]) -> candle_core::Result<(Vec<T>, Shape)> {
+        let (y, arg, shape) = self.select(x, dims)?;
+        if let Ok(mut saved) = self.arg.lock() {
+            *saved = Some(Arc::new(arg));
+        }
+        Ok((y, shape))
+    }
+}
+
 impl CustomOp1 for MaxPoolOp {
     fn name(&self) -> &'static str {
-        "max-pool"
+        Self::NAME
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
-        let (lo, hi) = contiguous_span("max-pool", l)?;
-        match s {
-            CpuStorage::F32(x) => {
-                let (y, shape) = self.run(&x[lo..hi], l.dims())?;
-                Ok((CpuStorage::F32(y), shape))
-            }
-            CpuStorage::F64(x) => {
-                let (y, shape) = self.run(&x[lo..hi], l.dims())?;
-                Ok((CpuStorage::F64(y), shape))
-            }
-            other => candle_core::bail!("max-pool: dtype {:?} not supported", other.dtype()),
-        }
+        custom_op::cpu_fwd(self, s, l)
     }
 
     fn bwd(&self, x: &Tensor, _y: &Tensor, grad: &Tensor) -> candle_core::Result<Option<Tensor>> {

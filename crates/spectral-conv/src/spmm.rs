@@ -9,10 +9,10 @@
 //!   `index_add`), so it runs on any device; candle's autodiff differentiates it. It is also the
 //!   reference the kernel is tested against.
 
+use crate::custom_op::{self, SliceOp};
 use crate::error::{ConvError, Result};
 use crate::kernel::{Csr, Real, spmm_batch_major};
 use crate::workspace::Workspace;
-use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Shape, Tensor};
 use sparse_csr::CsrMatrix;
 use std::sync::Arc;
@@ -288,13 +288,6 @@ pub(crate) fn use_kernel(backend: Backend, x: &Tensor) -> bool {
         && matches!(x.dtype(), DType::F32 | DType::F64)
 }
 
-/// The contiguous `[lo, hi)` span of a storage a layout covers, or an error naming the op.
-pub(crate) fn contiguous_span(op: &str, layout: &Layout) -> candle_core::Result<(usize, usize)> {
-    layout
-        .contiguous_offsets()
-        .ok_or_else(|| candle_core::Error::Msg(format!("{op}: input is not contiguous")))
-}
-
 /// The custom op: y = A x on `[B, cols, C]`; backward applies Aᵀ.
 struct SpmmOp {
     a: Arc<Csr>,
@@ -302,7 +295,9 @@ struct SpmmOp {
     ws: Arc<Workspace>,
 }
 
-impl SpmmOp {
+impl SliceOp for SpmmOp {
+    const NAME: &'static str = "csr-spmm";
+
     fn run<T: Real>(&self, x: &[T], dims: &[usize]) -> candle_core::Result<(Vec<T>, Shape)> {
         let &[batch, v, c] = dims else {
             candle_core::bail!("csr-spmm: expected a rank-3 input, got {dims:?}");
@@ -320,22 +315,11 @@ impl SpmmOp {
 
 impl CustomOp1 for SpmmOp {
     fn name(&self) -> &'static str {
-        "csr-spmm"
+        Self::NAME
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
-        let (lo, hi) = contiguous_span("csr-spmm", l)?;
-        match s {
-            CpuStorage::F32(x) => {
-                let (y, shape) = self.run(&x[lo..hi], l.dims())?;
-                Ok((CpuStorage::F32(y), shape))
-            }
-            CpuStorage::F64(x) => {
-                let (y, shape) = self.run(&x[lo..hi], l.dims())?;
-                Ok((CpuStorage::F64(y), shape))
-            }
-            other => candle_core::bail!("csr-spmm: dtype {:?} not supported", other.dtype()),
-        }
+        custom_op::cpu_fwd(self, s, l)
     }
 
     fn bwd(&self, _x: &Tensor, _y: &Tensor, grad: &Tensor) -> candle_core::Result<Option<Tensor>> {
