@@ -2,12 +2,12 @@
 
 use crate::{CliError, print_warnings};
 use deform_features::{
-    FeatureExtractor, FeatureFile, FeatureOptions, Normalization, Reconstructor, RestMesh,
-    save_features,
+    FeatureExtractor, FeatureFile, FeatureOptions, Features, Normalization, Reconstructor,
+    RestMesh, save_features,
 };
 use mesh_io::MeshSet;
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Options shared by both commands: how features are computed.
@@ -83,17 +83,26 @@ fn extractor_for(set: &MeshSet, flags: &FeatureFlags) -> Result<FeatureExtractor
     Ok(FeatureExtractor::new(rest, flags.options())?)
 }
 
-pub fn run_features(args: &FeaturesArgs) -> Result<(), CliError> {
-    let loaded = mesh_io::load_set(&args.set)?;
+/// The set at `path`, its extractor, the features and the seconds they took; warnings printed.
+fn load_and_extract(
+    path: &Path,
+    flags: &FeatureFlags,
+) -> Result<(MeshSet, FeatureExtractor, Features, f64), CliError> {
+    let loaded = mesh_io::load_set(path)?;
     print_warnings(&loaded.warnings);
     let set = loaded.value;
     let start = Instant::now();
-    let extractor = extractor_for(&set, &args.flags)?;
+    let extractor = extractor_for(&set, flags)?;
     let out = extractor.extract(&set)?;
     let seconds = start.elapsed().as_secs_f64();
     for w in &out.warnings {
         eprintln!("warning: {w}");
     }
+    Ok((set, extractor, out, seconds))
+}
+
+pub fn run_features(args: &FeaturesArgs) -> Result<(), CliError> {
+    let (set, _, out, seconds) = load_and_extract(&args.set, &args.flags)?;
     let normalization = Normalization::fit([&out.features])?;
     let features = if args.raw {
         out.features
@@ -167,17 +176,7 @@ struct WorstVertex {
 }
 
 pub fn run_roundtrip(args: &RoundtripArgs) -> Result<(), CliError> {
-    let loaded = mesh_io::load_set(&args.set)?;
-    print_warnings(&loaded.warnings);
-    let set = loaded.value;
-
-    let start = Instant::now();
-    let extractor = extractor_for(&set, &args.flags)?;
-    let out = extractor.extract(&set)?;
-    let seconds_features = start.elapsed().as_secs_f64();
-    for w in &out.warnings {
-        eprintln!("warning: {w}");
-    }
+    let (set, extractor, out, seconds_features) = load_and_extract(&args.set, &args.flags)?;
     // What the network sees: normalised, stored as f32; the inverse works from that only.
     let normalization = Normalization::fit([&out.features])?;
     let stored = normalization.apply(&out.features);
