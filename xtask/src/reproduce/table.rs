@@ -81,6 +81,78 @@ pub fn aggregate(results: &[RunResult], dataset: &str, column: &str) -> Option<A
     })
 }
 
+/// Ours and another column on `dataset` over the seeds both have finished: comparing a mean
+/// over three seeds with one seed's figure would set one split's luck against another's.
+#[derive(Debug, Clone)]
+pub struct Paired {
+    /// Ours' test RMS over the shared seeds.
+    pub ours: Stat,
+    /// The other column's test RMS over the same seeds.
+    pub it: Stat,
+    pub seeds: Vec<u64>,
+    /// Whether either column has finished seeds the other has not.
+    pub partial: bool,
+}
+
+impl Paired {
+    /// (ours − it) / it in percent, on the shared seeds' mean test RMS.
+    pub fn change(&self) -> f64 {
+        super::paper::relative_change(self.ours.mean, self.it.mean)
+    }
+
+    /// [`Self::change`] as a percentage, naming the seeds when not every finished seed is shared.
+    pub fn show_change(&self) -> String {
+        let change = percent(self.change());
+        if self.partial {
+            format!("{change} ({})", self.seed_list())
+        } else {
+            change
+        }
+    }
+
+    /// "seed 1" or "seeds 1, 3".
+    pub fn seed_list(&self) -> String {
+        let list: Vec<String> = self.seeds.iter().map(u64::to_string).collect();
+        let noun = if list.len() == 1 { "seed" } else { "seeds" };
+        format!("{noun} {}", list.join(", "))
+    }
+}
+
+/// [`Paired`] figures of ours and `column` on `dataset`, if they share a finished seed.
+pub fn paired(results: &[RunResult], dataset: &str, ours: &str, column: &str) -> Option<Paired> {
+    let rms = |col: &str, seed: u64| {
+        results
+            .iter()
+            .find(|r| r.dataset == dataset && r.column == col && r.seed == seed)
+            .map(|r| r.test_rms)
+    };
+    let mut all: Vec<u64> = results
+        .iter()
+        .filter(|r| r.dataset == dataset && (r.column == ours || r.column == column))
+        .map(|r| r.seed)
+        .collect();
+    all.sort_unstable();
+    all.dedup();
+    let (mut seeds, mut a, mut b) = (Vec::new(), Vec::new(), Vec::new());
+    let mut partial = false;
+    for &seed in &all {
+        match (rms(ours, seed), rms(column, seed)) {
+            (Some(x), Some(y)) => {
+                seeds.push(seed);
+                a.push(x);
+                b.push(y);
+            }
+            _ => partial = true,
+        }
+    }
+    Some(Paired {
+        ours: Stat::of(&a)?,
+        it: Stat::of(&b)?,
+        seeds,
+        partial,
+    })
+}
+
 /// The statistic of `f` over `runs` if every run has a value.
 fn all_of(runs: &[&RunResult], f: impl Fn(&RunResult) -> Option<f64>) -> Option<Stat> {
     let values: Option<Vec<f64>> = runs.iter().map(|r| f(r)).collect();

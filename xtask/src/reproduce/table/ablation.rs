@@ -1,7 +1,7 @@
 //! The "Ablation on …" sections, one per data set: every ablation column's numbers beside ours,
 //! ours' error on test shapes whose copies train, and whether ours has the lowest test RMS.
 
-use super::{aggregate, columns_of, percent};
+use super::{aggregate, columns_of, paired, percent};
 use crate::reproduce::paper;
 use crate::reproduce::plan::{Group, OURS};
 use crate::reproduce::run::RunResult;
@@ -24,10 +24,8 @@ pub(super) fn ablation(md: &mut String, o: &Outcome, set: &LoadedSet) {
             let _ = writeln!(md, "| {} | not run | | | | | | | |", column.label);
             continue;
         };
-        let against = match &ours {
-            Some(ours) if !column.is_ours() => {
-                percent(paper::relative_change(ours.rms.mean, a.rms.mean))
-            }
+        let against = match paired(&o.results, name, OURS, column.id) {
+            Some(p) if !column.is_ours() => p.show_change(),
             _ => "—".into(),
         };
         let _ = writeln!(
@@ -97,30 +95,35 @@ fn copies(md: &mut String, o: &Outcome, dataset: &str) {
 /// Whether ours has the lowest RMS of the ablation columns on `dataset`, and if not, which
 /// column beats it and whether by more than the spread over seeds.
 fn verdict(md: &mut String, o: &Outcome, dataset: &str) {
-    let Some(ours) = aggregate(&o.results, dataset, OURS) else {
+    if aggregate(&o.results, dataset, OURS).is_none() {
         return;
-    };
+    }
     let mut below = Vec::new();
     for column in columns_of(Group::Ablation).filter(|c| !c.is_ours()) {
-        if let Some(a) = aggregate(&o.results, dataset, column.id)
-            && a.rms.mean < ours.rms.mean
+        if let Some(p) = paired(&o.results, dataset, OURS, column.id)
+            && p.it.mean < p.ours.mean
         {
-            let spread = match (a.rms.std, ours.rms.std) {
+            let spread = match (p.it.std, p.ours.std) {
                 (Some(x), Some(y)) => Some(x.max(y)),
                 _ => None,
             };
             let how = match spread {
                 None => "one seed: no spread to compare with".to_string(),
-                Some(s) if ours.rms.mean - a.rms.mean <= s => {
+                Some(s) if p.ours.mean - p.it.mean <= s => {
                     "within one standard deviation".to_string()
                 }
                 Some(_) => "by more than one standard deviation".to_string(),
             };
+            let on = if p.partial {
+                format!(" on {}", p.seed_list())
+            } else {
+                String::new()
+            };
             below.push(format!(
-                "{} ({} against ours {}; {how})",
+                "{} ({} against ours {}{on}; {how})",
                 column.label,
-                a.rms.show(),
-                ours.rms.show(),
+                p.it.show(),
+                p.ours.show(),
             ));
         }
     }

@@ -125,7 +125,9 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
          evaluation script `show_error.m`. The paper calls its numbers RMS errors, but the \
          authors' released evaluation computes rigidly aligned mean distances, so the paper's \
          figures stand beside our rigid mean dist. Every number is mean ± sample standard \
-         deviation over the seeds. \"ours against it\" = (ours − it) / it on RMS.\n\n",
+         deviation over the seeds. \"ours against it\" = (ours − it) / it on \
+         the mean RMS over the seeds both have finished (named in brackets when either has a \
+         seed the other lacks).\n\n",
     );
 }
 

@@ -1,7 +1,7 @@
 //! The "Relative improvements of ours" section: ours against every other ablation column on test
 //! RMS, per data set and averaged, beside the paper's claims and its own table's average.
 
-use super::{aggregate, columns_of, percent};
+use super::{columns_of, paired, percent};
 use crate::reproduce::Outcome;
 use crate::reproduce::paper;
 use crate::reproduce::plan::{Group, OURS};
@@ -10,8 +10,8 @@ use std::fmt::Write;
 
 pub(super) fn improvements(md: &mut String, o: &Outcome) {
     md.push_str(
-        "## Relative improvements of ours\n\n(ours − other) / other on test RMS, per data set \
-         and averaged over data sets as the paper averages over its four. \"paper's table\" \
+        "## Relative improvements of ours\n\n(ours − other) / other on test RMS over the seeds \
+         both have finished (named where one has more), per data set and averaged over data sets as the paper averages over its four. \"paper's table\" \
          recomputes that average from the paper's own ablation table.\n\n| against | paper's \
          claim | paper's table |",
     );
@@ -33,16 +33,12 @@ pub(super) fn improvements(md: &mut String, o: &Outcome) {
         let mut changes = Vec::new();
         for set in &o.sets {
             let name = set.dataset.name;
-            match (
-                aggregate(&o.results, name, OURS),
-                aggregate(&o.results, name, column.id),
-            ) {
-                (Some(ours), Some(other)) => {
-                    let change = paper::relative_change(ours.rms.mean, other.rms.mean);
-                    changes.push(change);
-                    let _ = write!(md, " {} |", percent(change));
+            match paired(&o.results, name, OURS, column.id) {
+                Some(p) => {
+                    changes.push(p.change());
+                    let _ = write!(md, " {} |", p.show_change());
                 }
-                _ => md.push_str(" — |"),
+                None => md.push_str(" — |"),
             }
         }
         let mean = Stat::of(&changes).map_or("—".into(), |s| percent(s.mean));

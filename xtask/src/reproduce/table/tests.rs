@@ -176,6 +176,52 @@ fn seed_by_seed_ranks_each_seed_and_counts_where_ours_is_below() {
 }
 
 #[test]
+fn ours_is_compared_with_a_partial_column_on_the_seeds_both_finished() {
+    // Ours: 1.0 on seed 1, 2.0 on seed 2 (mean 1.5). Remeshing finished seed 1 only, at 1.2:
+    // against ours' seed 1 it is above (ours −16.67 %), though below ours' two-seed mean.
+    let results = vec![
+        result("ours", 1, 1.0),
+        result("ours", 2, 2.0),
+        result("remesh", 1, 1.2),
+        result("qem", 1, 0.8),
+        result("qem", 2, 1.6),
+    ];
+    let p = paired(&results, "synthetic", OURS, "remesh").unwrap();
+    assert_eq!((p.seeds.clone(), p.partial), (vec![1], true));
+    assert!((p.change() - (1.0 - 1.2) / 1.2 * 100.0).abs() < 1e-12);
+    assert_eq!(p.show_change(), "-16.67 % (seed 1)");
+    let q = paired(&results, "synthetic", OURS, "qem").unwrap();
+    assert_eq!((q.seeds.clone(), q.partial), (vec![1, 2], false));
+    assert_eq!(q.show_change(), "+25.00 %");
+    assert!(paired(&results, "synthetic", OURS, "graph").is_none());
+
+    let md = markdown(&outcome(results), None);
+    let row = |label: &str| {
+        md.lines()
+            .find(|l| l.starts_with(&format!("| {label} |")))
+            .unwrap_or_else(|| panic!("no row {label} in {md}"))
+            .to_string()
+    };
+    assert!(row("uniform remeshing, mean pooling").contains("| -16.67 % (seed 1) |"));
+    assert!(row("classical QEM, mean pooling").contains("| +25.00 % |"));
+    // The verdict names classical QEM (below ours on both seeds), not remeshing.
+    let verdict = md
+        .lines()
+        .find(|l| l.starts_with("On synthetic, ours is **not** the lowest"))
+        .unwrap_or_else(|| panic!("{md}"));
+    assert!(verdict.contains("classical QEM, mean pooling (1.200 ± 0.5657 against ours 1.500 ± 0.7071; within one standard deviation)"), "{verdict}");
+    assert!(!verdict.contains("remeshing"), "{verdict}");
+    // A column below ours on the shared seed says which seed that is.
+    let results = vec![
+        result("ours", 1, 1.0),
+        result("ours", 2, 2.0),
+        result("graph", 2, 1.5),
+    ];
+    let md = markdown(&outcome(results), None);
+    assert!(md.contains("graph pooling (Shen et al. 2018) (1.500 against ours 2.000 on seed 2; one seed: no spread to compare with)"), "{md}");
+}
+
+#[test]
 fn the_header_says_a_report_only_page_trained_nothing_and_gives_each_sets_time() {
     let mut o = outcome(vec![result("ours", 1, 0.5)]);
     let md = markdown(&o, None);
