@@ -68,10 +68,12 @@ pub struct RoundtripArgs {
     /// A folder of mesh files, a multi-frame .glb/.gltf, or a .mvset cache.
     set: PathBuf,
     /// Print one JSON object (keys: frames, vertices, rms, max, rms_rel, max_rel, worst_frame,
-    /// worst_frame_rms_rel, worst_vertex, seconds_features, seconds_reconstruct, options).
+    /// worst_frame_rms_rel, worst_vertex, seconds_features, seconds_reconstruct, options, and
+    /// worst_vertices with --worst).
     #[arg(long)]
     json: bool,
-    /// Also list the N vertices with the largest error (over all frames).
+    /// Also list the N vertices with the largest error over all frames (vertex, max_rel,
+    /// degree, boundary, rest_position).
     #[arg(long, default_value_t = 0)]
     worst: usize,
     #[command(flatten)]
@@ -164,6 +166,19 @@ struct RoundtripReport {
     seconds_features: f64,
     seconds_reconstruct: f64,
     options: FeatureOptions,
+    /// The `--worst N` vertices by their largest error over the frames (absent without it).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    worst_vertices: Vec<VertexError>,
+}
+
+/// One vertex's largest error over all frames, relative to each frame's diagonal.
+#[derive(Debug, Clone, serde::Serialize)]
+struct VertexError {
+    vertex: usize,
+    max_rel: f64,
+    degree: usize,
+    boundary: bool,
+    rest_position: [f32; 3],
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -223,6 +238,20 @@ pub fn run_roundtrip(args: &RoundtripArgs) -> Result<(), CliError> {
         }
     }
     let count = (meshes.len() * n) as f64;
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| per_vertex_max[b].total_cmp(&per_vertex_max[a]));
+    let rest = set.frame(args.flags.rest_index(&set)?);
+    let worst_vertices = order
+        .iter()
+        .take(args.worst)
+        .map(|&v| VertexError {
+            vertex: v,
+            max_rel: per_vertex_max[v],
+            degree: degree[v],
+            boundary: boundary[v],
+            rest_position: rest[v],
+        })
+        .collect();
     let report = RoundtripReport {
         frames: set.len(),
         vertices: n,
@@ -242,6 +271,7 @@ pub fn run_roundtrip(args: &RoundtripArgs) -> Result<(), CliError> {
         seconds_features,
         seconds_reconstruct,
         options: args.flags.options(),
+        worst_vertices,
     };
     if args.json {
         let text = serde_json::to_string_pretty(&report)
@@ -283,17 +313,18 @@ pub fn run_roundtrip(args: &RoundtripArgs) -> Result<(), CliError> {
             report.seconds_features,
             report.seconds_reconstruct
         );
-    }
-    if args.worst > 0 {
-        let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&a, &b| per_vertex_max[b].total_cmp(&per_vertex_max[a]));
-        let rest = set.frame(args.flags.rest_index(&set)?);
-        eprintln!("vertex  max_rel    degree  boundary  rest position");
-        for &v in order.iter().take(args.worst) {
-            eprintln!(
-                "{v:6}  {:.3e}  {:6}  {:8}  {:?}",
-                per_vertex_max[v], degree[v], boundary[v], rest[v]
-            );
+        if !report.worst_vertices.is_empty() {
+            out!("  vertex  max_rel    degree  boundary  rest position");
+            for w in &report.worst_vertices {
+                out!(
+                    "  {:6}  {:.3e}  {:6}  {:8}  {:?}",
+                    w.vertex,
+                    w.max_rel,
+                    w.degree,
+                    w.boundary,
+                    w.rest_position
+                );
+            }
         }
     }
     Ok(())

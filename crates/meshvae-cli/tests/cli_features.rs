@@ -66,6 +66,26 @@ fn roundtrip_reconstructs_every_frame_to_float_rounding() {
     assert!(rms > 0.0 && rms < 1e-6, "{report}");
     assert!(max >= rms, "{report}");
     assert!(report["worst_vertex"]["error_rel"].as_f64().unwrap() <= max);
+    assert!(report.get("worst_vertices").is_none(), "only with --worst");
+
+    // --worst N: the N vertices by largest error, in the JSON and on stdout in text mode.
+    let printed = ok(&meshvae(&["roundtrip", s(&set), "--json", "--worst", "3"]));
+    let report: serde_json::Value = serde_json::from_str(&printed).unwrap();
+    let worst = report["worst_vertices"].as_array().unwrap();
+    assert_eq!(worst.len(), 3);
+    let errors: Vec<f64> = worst
+        .iter()
+        .map(|w| w["max_rel"].as_f64().unwrap())
+        .collect();
+    assert!(errors.windows(2).all(|p| p[0] >= p[1]), "{errors:?}");
+    assert_eq!(errors[0], max);
+    assert_eq!(worst[0]["vertex"], report["worst_vertex"]["vertex"]);
+    assert_eq!(worst[0]["rest_position"].as_array().unwrap().len(), 3);
+    let text = ok(&meshvae(&["roundtrip", s(&set), "--worst", "2"]));
+    let table = text
+        .find("vertex  max_rel")
+        .expect("the table is on stdout");
+    assert_eq!(text[table..].lines().count(), 3, "{text}");
 }
 
 #[test]
