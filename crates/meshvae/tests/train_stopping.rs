@@ -176,6 +176,14 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
         after >= before * (1.0 - schedule.min_improvement),
         "{after} vs {before}"
     );
+    // Each epoch's record carries the count the rule reads: it restarts at a new best and
+    // reached the patience at the last epoch.
+    let stalls: Vec<u64> = log.iter().map(|r| r.since_best.unwrap()).collect();
+    assert!(stalls.contains(&0), "{stalls:?}");
+    assert!(
+        *stalls.last().unwrap() >= schedule.patience as u64,
+        "{stalls:?}"
+    );
     assert!(log.iter().any(|r| r.lr.unwrap() < req.train.lr), "no cut");
     assert!(
         log.iter().any(|r| r.test_loss.is_none()),

@@ -408,7 +408,8 @@ impl Trainer<'_> {
 
     /// One run, with its own epoch bar. A converged-plan run's bar is as long as its budget in
     /// epochs once its first epoch tells how many steps an epoch takes (the step budget, an
-    /// upper bound, until then); the run usually stops before its end.
+    /// upper bound, until then); the run usually stops before its end, when its message's count
+    /// of steps without a new best reaches the patience.
     fn train(&self, run: &Run) -> Result<RunResult, ReproError> {
         let length = match run.budget {
             Budget::Epochs(epochs) => epochs,
@@ -420,7 +421,9 @@ impl Trainer<'_> {
         {
             bar.set_style(style);
         }
-        bar.set_message(run.name());
+        let name = run.name();
+        bar.set_message(name.clone());
+        let patience = run.train_config().schedule.patience;
         let checkpoint_seconds = if self.options.quick { 1e9 } else { 60.0 };
         let result = run::execute(
             run,
@@ -438,6 +441,9 @@ impl Trainer<'_> {
                     bar.set_length(max_steps.div_ceil(steps_per_epoch) as u64);
                 }
                 bar.set_position(record.epoch as u64);
+                if let Some(n) = record.since_best {
+                    bar.set_message(format!("{name}  no new best for {n}/{patience} steps"));
+                }
             },
         );
         bar.finish_and_clear();

@@ -28,6 +28,11 @@ pub struct EpochRecord {
     /// The learning rate of the epoch's last step (absent from older logs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lr: Option<f64>,
+    /// Optimizer steps since the last new best validation (or training) loss when the epoch
+    /// ended; training converges when this reaches the schedule's patience. Absent where the
+    /// schedule never stops early, and from older logs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub since_best: Option<u64>,
     /// What computed the epoch's steps (absent from older logs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub executor: Option<super::ExecutorKind>,

@@ -407,6 +407,9 @@ pub fn train(
             seconds: t0.elapsed().as_secs_f64(),
             step: adam.step_count(),
             lr: Some(adam.config().lr),
+            since_best: schedule
+                .stops_early()
+                .then_some(progress.schedule.since_best as u64),
             executor: Some(executor.kind),
             executor_reason: executor.reason.clone(),
         };
@@ -458,14 +461,9 @@ pub fn train(
         let show = |l: Option<f64>| l.map_or("–".into(), |t| format!("{t:.3}"));
         // The bar's length is the budget; a run usually stops earlier, when the count of steps
         // without a new best reaches the patience.
-        let stall = if schedule.stops_early() {
-            format!(
-                "  no new best for {}/{} steps",
-                progress.schedule.since_best, schedule.patience
-            )
-        } else {
-            String::new()
-        };
+        let stall = record.since_best.map_or(String::new(), |n| {
+            format!("  no new best for {n}/{} steps", schedule.patience)
+        });
         bar.set_message(format!(
             "epoch {epoch}/{epochs}  loss {:.3}  val {}  test {}  lr {:.1e}{stall}",
             record.train_loss,
