@@ -364,9 +364,10 @@ pub fn train(
                 return Err(e);
             }
             let message = recovery.message(&progress);
-            // A hidden bar prints nothing, and a recovered divergence must not pass unseen.
+            // A hidden bar prints nothing, and a recovered divergence must not pass unseen;
+            // without the bar's context, the folder says which of several runs it was.
             if bar.is_hidden() {
-                eprintln!("{message}");
+                eprintln!("{}: {message}", folder.dir.display());
             } else {
                 bar.println(message);
             }
