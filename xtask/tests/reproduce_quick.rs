@@ -260,6 +260,7 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         assert_eq!(r.stop_reason.as_deref(), Some("budget"));
         // 7 training meshes: one step per epoch.
         assert_eq!((r.steps, r.epochs), (Some(4), 4), "{}", column.id);
+        assert_eq!(r.rollbacks, Some(0), "{}", column.id);
     }
     let md = std::fs::read_to_string(dir.join("converged.md")).unwrap();
     assert!(
@@ -267,6 +268,12 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         "{md}"
     );
     assert!(md.contains("budget 4 steps)"), "{md}");
+    assert!(
+        md.contains(&format!(
+            "No blow-ups (a NaN loss) in the {runs} runs whose record keeps the count."
+        )),
+        "{md}"
+    );
     assert!(
         md.contains(&format!(
             "- How the runs stopped: synthetic 0 converged, {runs} at the step budget, mean 4 \

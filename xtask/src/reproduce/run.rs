@@ -81,6 +81,12 @@ pub struct RunResult {
     pub steps: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_mean_distance_rigid: Option<f64>,
+    /// Blow-ups: how often the loss went NaN and training went on from its best weights at
+    /// half the rate (`run.json`'s `rollbacks`). A run that loses its rate early can stop
+    /// higher, so a close comparison needs it; absent from results written before records
+    /// kept it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rollbacks: Option<usize>,
     /// The rigid mean distance over the test meshes whose shape a training mesh repeats, and
     /// over the others, with their counts; present where the split put copies of test shapes
     /// among the training meshes (`--split-by-mesh` on horse-gallop).
@@ -289,6 +295,7 @@ pub fn execute(
         threads: Some(rayon::current_num_threads()),
         stop_reason: status.as_ref().map(|s| s.stop_reason.to_string()),
         steps: status.as_ref().map(|s| s.steps),
+        rollbacks: status.as_ref().map(|s| s.rollbacks),
         test_mean_distance_rigid: Some(report.test.mean_distance_rigid),
         copy_split: report.copies.map(|c| CopySplitRecord {
             copy_in_training_meshes: c.copy_in_training.meshes,

@@ -31,6 +31,7 @@ pub(super) fn seed_by_seed(md: &mut String, o: &Outcome) {
         if let Some(max_steps) = o.options.budget.max_steps() {
             stops(md, &runs, max_steps);
         }
+        blowups(md, &runs);
     }
 }
 
@@ -159,4 +160,62 @@ fn stops(md: &mut String, runs: &[&RunResult], max_steps: usize) {
             runs.len()
         );
     }
+}
+
+/// Which runs blew up (a NaN loss, after which training goes on from the best weights at half
+/// the rate): such a run may stop higher than it would have, which matters where columns are
+/// close. Silent where no record keeps the count.
+fn blowups(md: &mut String, runs: &[&RunResult]) {
+    let recorded = runs.iter().filter(|r| r.rollbacks.is_some()).count();
+    if recorded == 0 {
+        return;
+    }
+    let mut hit = Vec::new();
+    let mut runs_hit = 0;
+    for column in COLUMNS {
+        let mut seeds: Vec<(u64, usize)> = runs
+            .iter()
+            .filter(|r| r.column == column.id)
+            .filter_map(|r| r.rollbacks.filter(|&n| n > 0).map(|n| (r.seed, n)))
+            .collect();
+        if seeds.is_empty() {
+            continue;
+        }
+        seeds.sort_unstable();
+        runs_hit += seeds.len();
+        let seeds: Vec<String> = seeds
+            .iter()
+            .map(|&(seed, n)| match n {
+                1 => format!("seed {seed}"),
+                n => format!("seed {seed} ×{n}"),
+            })
+            .collect();
+        hit.push(format!("`{}` ({})", column.id, seeds.join(", ")));
+    }
+    if hit.is_empty() {
+        let _ = write!(
+            md,
+            "No blow-ups (a NaN loss) in the {recorded} runs whose record keeps the count."
+        );
+    } else {
+        let _ = write!(
+            md,
+            "Blow-ups (the loss went NaN; training went on from the best weights at half the \
+             rate) in {runs_hit} of the {recorded} runs whose record keeps the count: {}.",
+            hit.join(", ")
+        );
+    }
+    let unrecorded = runs.len() - recorded;
+    if unrecorded > 0 {
+        let _ = write!(
+            md,
+            " {unrecorded} earlier {} not keep it.",
+            if unrecorded == 1 {
+                "record does"
+            } else {
+                "records do"
+            }
+        );
+    }
+    md.push_str("\n\n");
 }

@@ -34,6 +34,7 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         stop_reason: None,
         steps: None,
         test_mean_distance_rigid: None,
+        rollbacks: None,
         copy_split: None,
         settings: None,
     }
@@ -283,6 +284,19 @@ fn the_header_describes_the_plan_and_how_converged_runs_stopped() {
         converged("max", 2, "converged", 5000),
     ];
     let md = markdown(&o, None);
+    assert!(!md.contains("Blow-ups"), "no record keeps the count: {md}");
+    o.results[1].rollbacks = Some(0);
+    o.results[2].rollbacks = Some(2);
+    o.results[3].rollbacks = Some(1);
+    let md = markdown(&o, None);
+    assert!(
+        md.contains(
+            "Blow-ups (the loss went NaN; training went on from the best weights at half the \
+             rate) in 2 of the 3 runs whose record keeps the count: `max` (seed 1 ×2, seed 2). \
+             1 earlier record does not keep it."
+        ),
+        "{md}"
+    );
     assert!(
         md.contains(
             "- Every run trained until the validation loss converged (learning rate 1e-2 \
