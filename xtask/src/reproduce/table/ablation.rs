@@ -143,7 +143,7 @@ fn verdict(md: &mut String, o: &Outcome, dataset: &str) {
     } else {
         let _ = writeln!(
             md,
-            "On {dataset}, ours is **not** the lowest: {} is below it. See the hand-written \
+            "On {dataset}, ours is **not** the lowest. Below it: {}. See the hand-written \
              notes for why.\n",
             below.join("; ")
         );

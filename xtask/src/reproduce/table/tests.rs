@@ -111,7 +111,7 @@ fn tables_show_mean_std_and_the_relative_change() {
         r.test_rms -= 0.15;
     }
     let md = markdown(&outcome(results), None);
-    assert!(md.contains("ours is **not** the lowest: modified QEM, max pooling (0.8500"));
+    assert!(md.contains("ours is **not** the lowest. Below it: modified QEM, max pooling (0.8500"));
     assert!(md.contains("within one standard deviation"));
     assert!(md.contains(BEGIN_HAND_WRITTEN) && md.contains(END_HAND_WRITTEN));
 }
