@@ -81,8 +81,8 @@ pub struct RunResult {
     pub steps: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_mean_distance_rigid: Option<f64>,
-    /// Blow-ups: how often the loss went NaN and training went on from its best weights at
-    /// half the rate (`run.json`'s `rollbacks`). A run that loses its rate early can stop
+    /// Blow-ups: how often the loss went NaN and training went back to its best weights (its
+    /// initial ones where those diverge again) at half the rate (`run.json`'s `rollbacks`). A run that loses its rate early can stop
     /// higher, so a close comparison needs it; absent from results written before records
     /// kept it.
     #[serde(default, skip_serializing_if = "Option::is_none")]

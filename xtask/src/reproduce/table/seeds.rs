@@ -200,8 +200,8 @@ fn blowups(md: &mut String, runs: &[&RunResult]) {
     } else {
         let _ = write!(
             md,
-            "Blow-ups (the loss went NaN; training went on from the best weights at half the \
-             rate) in {runs_hit} of the {recorded} runs whose record keeps the count: {}.",
+            "Blow-ups (the loss went NaN; training went back to its best weights, or its initial \
+             ones, at half the rate) in {runs_hit} of the {recorded} runs whose record keeps the count: {}.",
             hit.join(", ")
         );
     }

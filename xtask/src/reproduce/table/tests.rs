@@ -291,8 +291,8 @@ fn the_header_describes_the_plan_and_how_converged_runs_stopped() {
     let md = markdown(&o, None);
     assert!(
         md.contains(
-            "Blow-ups (the loss went NaN; training went on from the best weights at half the \
-             rate) in 2 of the 3 runs whose record keeps the count: `max` (seed 1 ×2, seed 2). \
+            "Blow-ups (the loss went NaN; training went back to its best weights, or its initial \
+             ones, at half the rate) in 2 of the 3 runs whose record keeps the count: `max` (seed 1 ×2, seed 2). \
              1 earlier record does not keep it."
         ),
         "{md}"
