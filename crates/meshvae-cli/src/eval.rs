@@ -21,7 +21,8 @@ pub struct EvalArgs {
     /// test_unseen_mean_distance_rigid (null unless the split put copies of test shapes among
     /// the training meshes), params,
     /// params_without_biases, epochs, best_epoch, selected_on, stop_reason, steps,
-    /// still_improving, train_seconds, vertices, test_meshes, val_meshes, train_meshes,
+    /// still_improving, train_seconds, rollbacks, phases (seconds by phase of training), loss_spike_epochs (epochs whose training
+    /// loss exceeds 3× the median of the 50 before them), vertices, test_meshes, val_meshes, train_meshes,
     /// split_by_shape, loss_plot, warnings: [{kind, message}] when the test error is not clearly
     /// below the mean training shape's or training was cut while still improving).
     #[arg(long)]
@@ -51,6 +52,12 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
     };
     let warnings = meshvae::quality_warnings(&report, status.as_ref());
     let warnings_json = crate::generate::print_quality(&warnings);
+    // Finite blow-ups, which the rollback does not see (it reacts to a non-finite loss).
+    let log = match folder.log().is_file() {
+        true => meshvae::read_log(&folder.log())?,
+        false => Vec::new(),
+    };
+    let spikes = meshvae::loss_spikes(&log, meshvae::SPIKE_WINDOW, meshvae::SPIKE_FACTOR);
     let copy_in_training = report.copies.map(|c| c.copy_in_training);
     let unseen = report.copies.and_then(|c| c.unseen);
     let value = serde_json::json!({
@@ -78,6 +85,9 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "steps": status.as_ref().map(|s| s.steps),
         "still_improving": status.as_ref().map(|s| s.still_improving),
         "train_seconds": status.as_ref().map(|s| s.seconds),
+        "rollbacks": status.as_ref().map(|s| s.rollbacks),
+        "phases": status.as_ref().and_then(|s| s.phases),
+        "loss_spike_epochs": spikes,
         "loss_plot": loss_plot.as_ref().map(|p| p.display().to_string()),
         "vertices": report.vertices,
         "test_meshes": report.test.meshes,
@@ -165,6 +175,39 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
             }
         ),
         None => out!("  stopped      {stop_reason} (a model trained before run.json)"),
+    }
+    if let Some(p) = status.as_ref().and_then(|s| s.phases) {
+        out!(
+            "  time         {:.0} s: batches {:.0}, forward and backward {:.0}, Adam {:.0}, \
+             validation {:.0}, test {:.0}, bookkeeping {:.0} (this process's part of the run)",
+            p.total(),
+            p.batches,
+            p.forward_backward,
+            p.adam,
+            p.validation,
+            p.test,
+            p.bookkeeping
+        );
+    }
+    let rollbacks = status.as_ref().map_or(0, |s| s.rollbacks);
+    if rollbacks > 0 || !spikes.is_empty() {
+        let shown: Vec<String> = spikes.iter().take(8).map(usize::to_string).collect();
+        out!(
+            "  blow-ups     {rollbacks} rolled back (non-finite loss); {} epochs with a training \
+             loss above {}× the median of the {} before{}",
+            spikes.len(),
+            meshvae::SPIKE_FACTOR,
+            meshvae::SPIKE_WINDOW,
+            if shown.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " (epochs {}{})",
+                    shown.join(", "),
+                    if spikes.len() > 8 { ", …" } else { "" }
+                )
+            }
+        );
     }
     if let Some(path) = &loss_plot {
         out!("  loss curves  {}", path.display());

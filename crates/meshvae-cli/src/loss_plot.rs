@@ -73,9 +73,12 @@ fn draw(log: &[EpochRecord], best_epoch: usize) -> Result<mesh_render::Image, Cl
             dashed: false,
         });
     }
+    // Cuts and rollbacks halve the rate at once; a decay lowers it a little every epoch, which
+    // is no event to mark (a cosine over 16 epochs or more never falls below 0.77 of the
+    // previous epoch's rate in one).
     for pair in log.windows(2) {
         if let (Some(a), Some(b)) = (pair[0].lr, pair[1].lr)
-            && b < a * 0.999
+            && b < a * 0.55
         {
             markers.push(Marker {
                 x: step_of(&pair[1]),

@@ -43,6 +43,18 @@ pub struct TrainArgs {
     /// steps, not on the noisy loss itself; 0 = the loss itself [default: 0].
     #[arg(long)]
     smoothing: Option<usize>,
+    /// Let the rate fall along a half cosine to 1/32 of --lr over this many steps after the
+    /// warm-up (no plateau cuts; the run stops once the decay has ended and --patience steps
+    /// pass without a new best); 0 cuts the rate on plateaus [default: 0].
+    #[arg(long)]
+    decay: Option<usize>,
+    /// Adam's β₂ [default: 0.999, TF's and the authors'].
+    #[arg(long)]
+    beta2: Option<f64>,
+    /// The dense heads' weights (W_μ, W_σ, tens of thousands of inputs per latent unit) train
+    /// at this fraction of the rate [default: 1, one rate for all, as the authors].
+    #[arg(long)]
+    head_lr_scale: Option<f64>,
     /// Seeds the split, the initial weights, the shuffles and the sampling [default: 1].
     #[arg(long)]
     seed: Option<u64>,
@@ -60,8 +72,8 @@ pub struct TrainArgs {
     /// Meshes per step [default: 50].
     #[arg(long)]
     batch: Option<usize>,
-    /// Adam's initial learning rate (the schedule halves it on plateaus) [default: 0.01; the
-    /// authors: 0.001].
+    /// Adam's initial learning rate (the peak after a warm-up; the schedule lowers it)
+    /// [default: 0.01; the authors: 0.001, constant].
     #[arg(long)]
     lr: Option<f64>,
     /// Chebyshev order K [default: 3].
@@ -270,6 +282,15 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     }
     if let Some(w) = args.warmup {
         train.schedule.warmup_steps = w;
+    }
+    if let Some(d) = args.decay {
+        train.schedule.decay_steps = d;
+    }
+    if let Some(b) = args.beta2 {
+        train.adam_beta2 = b;
+    }
+    if let Some(x) = args.head_lr_scale {
+        train.head_lr_scale = x;
     }
     train.seed = args.seed.unwrap_or(base_train.seed);
     train.batch = args.batch.unwrap_or(base_train.batch);

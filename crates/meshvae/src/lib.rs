@@ -87,15 +87,19 @@ pub use cpu::{Engine, StepLoss};
 // Training (`train/`): the loop, its optimiser, losses, schedule, data, split and checkpoints.
 pub use train::adam::{Adam, AdamConfig};
 pub use train::checkpoint::{Checkpoint, Progress};
-pub use train::config::{DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE, TrainConfig};
+pub use train::config::{
+    DEFAULT_BETA2, DEFAULT_HEAD_LR_SCALE, DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE,
+    TrainConfig,
+};
 pub use train::data::{MeshData, NormalizationFit, denormalize};
 pub use train::folder::{ModelFolder, ModelSpec, SplitFile};
 pub use train::loss::{Loss, LossWeights};
 pub use train::schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
 pub use train::split::{Selection, Split, resolve_mesh};
 pub use train::{
-    EpochRecord, Executor, ExecutorKind, RunStatus, TrainOptions, TrainRequest, TrainSummary,
-    hierarchy_config, read_log, read_status, train, validation_loss,
+    EpochRecord, Executor, ExecutorKind, PhaseSeconds, RunStatus, SPIKE_FACTOR, SPIKE_WINDOW,
+    TrainOptions, TrainRequest, TrainSummary, hierarchy_config, loss_spikes, read_log, read_status,
+    train, validation_loss,
 };
 
 // A trained model folder loaded for use (`folder.rs`).

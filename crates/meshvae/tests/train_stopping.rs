@@ -5,8 +5,9 @@ mod common;
 
 use common::{options, request, scratch, small_set};
 use meshvae::{
-    DEFAULT_MAX_STEPS, EpochRecord, ExecutorKind, ModelFolder, RunStatus, Schedule, StopReason,
-    TrainOptions, TrainSummary, VaeError, read_log, read_status, train,
+    DEFAULT_MAX_STEPS, EpochRecord, ExecutorKind, ModelFolder, RunStatus, SPIKE_FACTOR,
+    SPIKE_WINDOW, Schedule, StopReason, TrainOptions, TrainSummary, VaeError, loss_spikes,
+    read_log, read_status, train,
 };
 
 #[test]
@@ -144,6 +145,18 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
     assert_eq!(status.steps, summary.steps);
     assert_eq!(status.path, "engine");
     assert_eq!(status.executor_reason, None);
+    // Where the time went: every phase of an epoch took some, and they add up to most of it.
+    let phases = status.phases.unwrap();
+    assert!(
+        phases.forward_backward > 0.0 && phases.adam > 0.0,
+        "{phases:?}"
+    );
+    assert!(phases.validation > 0.0 && phases.test > 0.0, "{phases:?}");
+    assert!(
+        phases.total() <= status.seconds,
+        "{phases:?} {}",
+        status.seconds
+    );
     let executor = summary.executor.clone().unwrap();
     assert_eq!(
         (executor.kind, executor.reason),
@@ -218,6 +231,49 @@ fn default_training_stops_converged_and_a_short_budget_says_budget() {
     );
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&short);
+}
+
+/// The cosine schedule with its stable settings (a warm-up, a peak of 5e-3, β₂ 0.99, the dense
+/// heads at a tenth of the rate): the rate peaks, falls to its floor, the run stops converged
+/// no earlier than the decay's end, `patience` steps after its last new best, and no epoch's
+/// training loss rises above 3× the median of the 50 before it (a finite blow-up).
+#[test]
+fn a_cosine_decay_converges_after_it_ends_without_a_loss_spike() {
+    let set = small_set(7, 8);
+    let dir = scratch("cosine");
+    let mut req = request(&set, &dir, 1);
+    req.train.steps = Some(DEFAULT_MAX_STEPS);
+    req.train.lr = 5e-3;
+    req.train.adam_beta2 = 0.99;
+    req.train.head_lr_scale = 0.1;
+    let schedule = Schedule {
+        decay_steps: 600,
+        patience: 150,
+        ..Schedule::cosine()
+    };
+    req.train.schedule = schedule;
+    let summary = train(&req, &options(false, false), |_| {}).unwrap();
+    assert_eq!(summary.stop_reason, StopReason::Converged, "{summary:?}");
+    let log = read_log(&ModelFolder::new(&dir).log()).unwrap();
+    let last = log.last().unwrap();
+    let floor = req.train.lr * schedule.min_lr_ratio;
+    assert!(log.iter().any(|r| r.lr.unwrap() == req.train.lr), "no peak");
+    assert!((last.lr.unwrap() - floor).abs() < 1e-9 * floor, "{last:?}");
+    assert!(last.step >= schedule.annealed_at(), "{last:?}");
+    assert!(
+        last.since_best.unwrap() >= schedule.patience as u64,
+        "{last:?}"
+    );
+    let spikes = loss_spikes(&log, SPIKE_WINDOW, SPIKE_FACTOR);
+    assert!(spikes.is_empty(), "loss spikes at epochs {spikes:?}");
+    // It learned: the validation loss ended far below where it started.
+    let first = log[0].val_loss.unwrap();
+    let best = log
+        .iter()
+        .filter_map(|r| r.val_loss)
+        .fold(f64::INFINITY, f64::min);
+    assert!(best < 0.5 * first, "{best} vs {first}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A run the engine does not take says so, with the reason, in the summary, on every line of

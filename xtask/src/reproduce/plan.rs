@@ -339,6 +339,8 @@ impl Run {
                 schedule: meshvae::Schedule::constant(),
                 lr: 1e-3,
                 normalize_quantile: 0.0,
+                adam_beta2: meshvae::AdamConfig::default().beta2,
+                head_lr_scale: 1.0,
                 ..TrainConfig::default()
             },
             Budget::Converged { max_steps } => TrainConfig {

@@ -495,6 +495,7 @@ mod tests {
             executor_reason: None,
             best_test_epoch: None,
             best_test_loss: None,
+            phases: None,
         };
         for (reason, done) in [
             (StopReason::Interrupted, false),

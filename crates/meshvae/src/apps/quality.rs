@@ -152,6 +152,7 @@ mod tests {
             executor_reason: None,
             best_test_epoch: None,
             best_test_loss: None,
+            phases: None,
         };
         let warning = improving_warning(&status).unwrap();
         assert_eq!(warning, QualityWarning::StoppedWhileImproving { steps: 30 });

@@ -18,6 +18,10 @@ use crate::error::{Result, VaeError};
 use mesh_hierarchy::{CsrMatrix, Hierarchy, PoolMode, adjacency};
 use spectral_conv::neighbour_mean_matrix;
 
+/// The dense heads' weights, W_μ and W_σ (`[V_L·C, latent]`): every latent unit sums all of the
+/// coarsest level's values, tens of thousands of inputs.
+pub const HEAD_WEIGHTS: [&str; 2] = ["enc.mu.weight", "enc.sigma.weight"];
+
 /// One level the network runs on.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Level {
@@ -190,9 +194,10 @@ impl NetPlan {
 
         let flat = levels[levels.len() - 1].vertices * config.channels;
         let latent = config.latent;
-        let w_mu = vars.weight("enc.mu.weight", vec![flat, latent]);
+        let [mu_name, sigma_name] = HEAD_WEIGHTS;
+        let w_mu = vars.weight(mu_name, vec![flat, latent]);
         let b_mu = vars.bias("enc.mu.bias", latent);
-        let w_sigma = vars.weight("enc.sigma.weight", vec![flat, latent]);
+        let w_sigma = vars.weight(sigma_name, vec![flat, latent]);
         let b_sigma = vars.bias("enc.sigma.bias", latent);
         let b_dec = vars.bias("dec.fc.bias", flat);
         let l = config.labels.len();

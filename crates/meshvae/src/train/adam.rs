@@ -46,6 +46,8 @@ pub(super) struct Slot {
     var: Var,
     m: Var,
     v: Var,
+    /// This variable's rate is the optimiser's times this ([`Adam::scale_lr`]).
+    lr_scale: f64,
 }
 
 /// The optimiser over a model's named variables.
@@ -95,6 +97,7 @@ impl Adam {
             .map(|(name, var)| {
                 let zeros = || Var::zeros(var.shape(), var.dtype(), var.device());
                 Ok(Slot {
+                    lr_scale: 1.0,
                     m: zeros()?,
                     v: zeros()?,
                     name,
@@ -120,6 +123,26 @@ impl Adam {
             return Err(VaeError::argument("lr", format!("{lr} is not positive")));
         }
         self.config.lr = lr;
+        Ok(())
+    }
+
+    /// Gives the variable `name` its own rate, `scale` times the optimiser's (1 by default).
+    /// Adam moves every weight by about the rate whatever its gradient's size, so a layer that
+    /// sums many inputs changes its outputs far more per step than a layer that sums few;
+    /// scaling its rate down evens that out.
+    pub fn scale_lr(&mut self, name: &str, scale: f64) -> Result<()> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(VaeError::argument(
+                "lr scale",
+                format!("{scale} is not positive"),
+            ));
+        }
+        let slot = self
+            .slots
+            .iter_mut()
+            .find(|s| s.name == name)
+            .ok_or_else(|| VaeError::argument("lr scale", format!("no variable named {name}")))?;
+        slot.lr_scale = scale;
         Ok(())
     }
 
@@ -191,6 +214,8 @@ impl Adam {
             let Some(g) = grads.get(&slot.var) else {
                 continue;
             };
+            let update = update.scaled(slot.lr_scale);
+            let lr = lr * slot.lr_scale;
             if crate::numerics::real::fusable(g) && g.dtype() == slot.var.dtype() {
                 // The CPU path: the engine's one-pass update (L2 gradient added inside).
                 let g = g.contiguous()?;
@@ -272,7 +297,7 @@ impl Adam {
         let update = self.next_update(l2);
         let mut half_sq = 0.0;
         for (s, g) in self.slots.iter().zip(grads) {
-            half_sq += update.run_on(s, g)?;
+            half_sq += update.scaled(s.lr_scale).run_on(s, g)?;
         }
         Ok(half_sq)
     }

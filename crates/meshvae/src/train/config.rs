@@ -2,6 +2,7 @@
 //! fractions, schedule, normalisation), saved with the model in `config.json`.
 
 use crate::error::{Result, VaeError};
+use crate::train::adam::AdamConfig;
 use crate::train::loss::LossWeights;
 use crate::train::schedule::Schedule;
 use serde::{Deserialize, Serialize};
@@ -17,8 +18,9 @@ pub struct TrainConfig {
     pub steps: Option<usize>,
     /// Meshes per step (the authors: 50); the last batch of an epoch may be smaller.
     pub batch: usize,
-    /// Adam's initial learning rate (1e-2; the authors' 1e-3 took more than 8,000 steps to
-    /// reach what 1e-2 reaches in 1,500, see docs/benchmarks.md "Convergence"; 3e-2 diverges).
+    /// Adam's initial (or, with a warm-up, peak) learning rate (1e-2; the authors' 1e-3 took
+    /// more than 8,000 steps to reach what 1e-2 reaches in 1,500, see docs/benchmarks.md
+    /// "Convergence"; 3e-2 diverges).
     pub lr: f64,
     /// Seeds the split, the initial weights, the shuffles and the sampling noise.
     pub seed: u64,
@@ -51,6 +53,24 @@ pub struct TrainConfig {
     /// as 0; new ones default to [`DEFAULT_NORMALIZE_QUANTILE`].
     #[serde(default, skip_serializing_if = "is_zero")]
     pub normalize_quantile: f64,
+    /// Adam's β₂, the decay of its squared-gradient average. Models saved before the option
+    /// read as TF's and the authors' 0.999.
+    #[serde(default = "tf_beta2")]
+    pub adam_beta2: f64,
+    /// The dense heads' weights (W_μ and W_σ, `enc.mu.weight` and `enc.sigma.weight`) train at
+    /// this fraction of the rate. Adam moves every weight by about the rate, so a unit summing
+    /// tens of thousands of inputs moves that many times further per step than a convolution
+    /// summing 27. Models saved before the option read as 1.
+    #[serde(default = "one")]
+    pub head_lr_scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn tf_beta2() -> f64 {
+    AdamConfig::default().beta2
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -84,11 +104,28 @@ impl Default for TrainConfig {
             schedule: Schedule::default(),
             normalize_on_all: false,
             normalize_quantile: DEFAULT_NORMALIZE_QUANTILE,
+            adam_beta2: DEFAULT_BETA2,
+            head_lr_scale: DEFAULT_HEAD_LR_SCALE,
         }
     }
 }
 
+/// The default [`TrainConfig::adam_beta2`]: TF's, as the authors.
+pub const DEFAULT_BETA2: f64 = 0.999;
+
+/// The default [`TrainConfig::head_lr_scale`]: one rate for every weight, as the authors.
+pub const DEFAULT_HEAD_LR_SCALE: f64 = 1.0;
+
 impl TrainConfig {
+    /// Adam's settings for this run (at the initial rate; the schedule sets it step by step).
+    pub fn adam(&self) -> AdamConfig {
+        AdamConfig {
+            lr: self.lr,
+            beta2: self.adam_beta2,
+            ..AdamConfig::default()
+        }
+    }
+
     /// The run's length in epochs when an epoch takes `steps_per_epoch` steps.
     pub fn epoch_budget(&self, steps_per_epoch: usize) -> usize {
         match self.steps {
@@ -109,6 +146,18 @@ impl TrainConfig {
             return Err(VaeError::argument(
                 "normalize_quantile",
                 format!("{} is not in [0, 0.5)", self.normalize_quantile),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.adam_beta2) {
+            return Err(VaeError::argument(
+                "adam_beta2",
+                format!("{} is not in [0, 1)", self.adam_beta2),
+            ));
+        }
+        if !(self.head_lr_scale.is_finite() && self.head_lr_scale > 0.0) {
+            return Err(VaeError::argument(
+                "head_lr_scale",
+                format!("{} is not positive", self.head_lr_scale),
             ));
         }
         if self.batch == 0 {
@@ -137,5 +186,52 @@ impl TrainConfig {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_saved_before_the_decay_and_beta2_read_as_they_trained() {
+        // A config.json of a model trained with the plateau schedule and TF's β₂: neither
+        // field was written then.
+        let mut value = serde_json::to_value(TrainConfig::default()).unwrap();
+        let map = value.as_object_mut().unwrap();
+        map.remove("adam_beta2");
+        map.remove("head_lr_scale");
+        map["schedule"]
+            .as_object_mut()
+            .unwrap()
+            .remove("decay_steps");
+        let old: TrainConfig = serde_json::from_value(value).unwrap();
+        assert_eq!((old.adam_beta2, old.head_lr_scale), (0.999, 1.0));
+        assert_eq!(old.schedule.decay_steps, 0);
+        assert_eq!(old.adam().beta2, 0.999);
+        // Today's defaults survive a round trip, and β₂ reaches Adam.
+        let new = TrainConfig::default();
+        let text = serde_json::to_string(&new).unwrap();
+        assert_eq!(serde_json::from_str::<TrainConfig>(&text).unwrap(), new);
+        assert_eq!((new.adam().beta2, new.adam().lr), (DEFAULT_BETA2, new.lr));
+    }
+
+    #[test]
+    fn a_beta2_outside_zero_to_one_or_a_head_scale_not_above_zero_is_refused() {
+        for bad in [1.0, -0.1, f64::NAN] {
+            let config = TrainConfig {
+                adam_beta2: bad,
+                ..TrainConfig::default()
+            };
+            let err = config.validate().unwrap_err().to_string();
+            assert!(err.contains("adam_beta2"), "{err}");
+            let config = TrainConfig {
+                head_lr_scale: bad - 1.0,
+                ..TrainConfig::default()
+            };
+            let err = config.validate().unwrap_err().to_string();
+            assert!(err.contains("head_lr_scale"), "{err}");
+        }
+        assert!(TrainConfig::default().validate().is_ok());
     }
 }

@@ -92,3 +92,78 @@ pub fn read_log(path: &Path) -> Result<Vec<EpochRecord>> {
         })
         .collect()
 }
+
+/// The epochs (by [`EpochRecord::epoch`]) whose training loss exceeds `factor` times the median
+/// of the `window` epochs before them: a finite blow-up, which the rollback (it reacts only to a
+/// non-finite loss) does not see. The first `window` epochs are not judged. `meshvae eval`
+/// reports them with `window` 50 and `factor` 3.
+pub fn loss_spikes(log: &[EpochRecord], window: usize, factor: f64) -> Vec<usize> {
+    let losses: Vec<f64> = log.iter().map(|r| r.train_loss).collect();
+    let mut sorted = Vec::with_capacity(window);
+    (window.max(1)..losses.len())
+        .filter(|&i| {
+            sorted.clear();
+            sorted.extend_from_slice(&losses[i - window..i]);
+            sorted.sort_by(f64::total_cmp);
+            let median = match window {
+                0 => return false,
+                w if w % 2 == 1 => sorted[w / 2],
+                w => 0.5 * (sorted[w / 2 - 1] + sorted[w / 2]),
+            };
+            // A NaN loss counts as a spike.
+            losses[i].is_nan() || losses[i] > factor * median
+        })
+        .map(|i| log[i].epoch)
+        .collect()
+}
+
+/// The rule [`loss_spikes`] applies by default: 3× the median of the 50 epochs before.
+pub const SPIKE_WINDOW: usize = 50;
+pub const SPIKE_FACTOR: f64 = 3.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn log_of(losses: &[f64]) -> Vec<EpochRecord> {
+        losses
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| EpochRecord {
+                epoch: i + 1,
+                train_loss: l,
+                rec: l,
+                kl: 0.0,
+                l2: 0.0,
+                val_loss: None,
+                test_loss: None,
+                seconds: 0.0,
+                step: i as u64 + 1,
+                lr: None,
+                since_best: None,
+                executor: None,
+                executor_reason: None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn spikes_are_epochs_above_three_times_the_recent_median() {
+        // A falling curve never spikes.
+        let falling: Vec<f64> = (0..200).map(|k| 100.0 / (1.0 + k as f64)).collect();
+        assert!(loss_spikes(&log_of(&falling), 50, 3.0).is_empty());
+        // A noisy plateau (10 to 16, median 13): one epoch above 39 spikes, and a NaN counts
+        // as one; 37 is within the rule.
+        let mut losses: Vec<f64> = (0..200).map(|k| 10.0 + (k % 7) as f64).collect();
+        assert!(loss_spikes(&log_of(&losses), 50, 3.0).is_empty());
+        losses[120] = 39.5;
+        losses[150] = f64::NAN;
+        assert_eq!(loss_spikes(&log_of(&losses), 50, 3.0), vec![121, 151]);
+        losses[120] = 37.0;
+        assert_eq!(loss_spikes(&log_of(&losses), 50, 3.0), vec![151]);
+        // The median of an even window is the mean of its middle two (1.5 here).
+        assert!(loss_spikes(&log_of(&[1.0, 2.0, 4.4]), 2, 3.0).is_empty());
+        assert_eq!(loss_spikes(&log_of(&[1.0, 2.0, 4.6]), 2, 3.0), vec![3]);
+        assert!(loss_spikes(&log_of(&losses[..50]), 50, 3.0).is_empty());
+    }
+}

@@ -47,6 +47,7 @@ mod executor;
 pub(crate) mod folder;
 pub(crate) mod loss;
 mod loss_pass;
+mod phases;
 mod request;
 mod rollback;
 pub(crate) mod schedule;
@@ -56,11 +57,12 @@ mod status;
 
 use bar::progress_bar;
 use best::{BestState, keep_weights, write_current};
-pub use epoch_log::{EpochRecord, read_log};
+pub use epoch_log::{EpochRecord, SPIKE_FACTOR, SPIKE_WINDOW, loss_spikes, read_log};
 use epoch_log::{append_log, truncate_log};
 pub use executor::{Executor, ExecutorKind};
 use loss_pass::epoch_loss;
 pub use loss_pass::validation_loss;
+pub use phases::PhaseSeconds;
 pub use request::{TrainOptions, TrainRequest, TrainSummary, hierarchy_config};
 use rollback::Recovery;
 use setup::{fresh_setup, resume_setup, write_model_files};
@@ -100,7 +102,12 @@ pub fn train(
     };
 
     let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
-    let mut adam = Adam::new(model.trainable_vars(), spec.train.lr)?;
+    let mut adam = Adam::with_config(model.trainable_vars(), spec.train.adam())?;
+    if spec.train.head_lr_scale != 1.0 {
+        for name in crate::net::plan::HEAD_WEIGHTS {
+            adam.scale_lr(name, spec.train.head_lr_scale)?;
+        }
+    }
     if let Some(files) = &files {
         write_model_files(&folder, &spec, &hierarchy, &data, files)?;
     }
@@ -175,7 +182,8 @@ pub fn train(
             .lr(&schedule, base_lr, adam.step_count().max(1)),
     )?;
     let prior_seconds = progress.seconds;
-    let status = |progress: &Progress, reason: StopReason, adam: &Adam| RunStatus {
+    let mut phases = PhaseSeconds::default();
+    let status = |progress: &Progress, reason: StopReason, adam: &Adam, phases| RunStatus {
         stop_reason: reason,
         epochs: progress.epoch,
         epoch_budget: epochs,
@@ -197,15 +205,17 @@ pub fn train(
             .best_test_loss
             .is_finite()
             .then_some(progress.best_test_loss),
+        phases: Some(phases),
     };
     // A converged run resumed from a checkpoint of its last epoch (versions 1 and 2; newer ones
     // are told by `run.json` above) has nothing left to learn.
-    let already_converged =
-        schedule.stops_early() && progress.schedule.since_best >= schedule.patience;
+    let already_converged = schedule.stops_early()
+        && progress.schedule.since_best >= schedule.patience
+        && adam.step_count() >= schedule.annealed_at();
     if !already_converged && progress.epoch < epochs {
         folder.write_json(
             &folder.status(),
-            &status(&progress, StopReason::Interrupted, &adam),
+            &status(&progress, StopReason::Interrupted, &adam, phases),
         )?;
     }
     let bar = progress_bar(options.progress, epochs, progress.epoch, steps_per_epoch);
@@ -256,9 +266,15 @@ pub fn train(
                     .schedule
                     .lr(&schedule, base_lr, adam.step_count() + 1),
             )?;
-            let x = data.batch(chunk, device)?;
-            let c = data.conditions(&model, chunk)?;
-            let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
+            let (x, c, eps) = phases.time(
+                |p| &mut p.batches,
+                || -> Result<_> {
+                    let x = data.batch(chunk, device)?;
+                    let c = data.conditions(&model, chunk)?;
+                    let eps = rng.normal_tensor((chunk.len(), spec.model.latent), device)?;
+                    Ok((x, c, eps))
+                },
+            )?;
             let step = adam.step_count() + 1;
             let diverged = |total: f64, rec: f64, kl: f64, l2: f64| {
                 format!(
@@ -278,7 +294,10 @@ pub fn train(
             let (total, rec, kl, l2) = match (engine.as_mut(), &c) {
                 (Some(engine), c) => {
                     let loss = &spec.train.loss;
-                    let l = engine.forward_backward_cond(&model, &x, c.as_ref(), &eps, loss)?;
+                    let l = phases.time(
+                        |p| &mut p.forward_backward,
+                        || engine.forward_backward_cond(&model, &x, c.as_ref(), &eps, loss),
+                    )?;
                     if !(l.rec + l.kl).is_finite() {
                         let l2 = model.l2_term()?.to_dtype(candle_core::DType::F64)?;
                         let l2 = l2.to_scalar::<f64>()? * w_l2;
@@ -286,7 +305,7 @@ pub fn train(
                         break;
                     }
                     // Adam also returns the L2 term of the weights it started from.
-                    let l2 = engine.apply_adam(&mut adam, w_l2)?;
+                    let l2 = phases.time(|p| &mut p.adam, || engine.apply_adam(&mut adam, w_l2))?;
                     let total = l.rec + l.kl + l2;
                     if !total.is_finite() {
                         divergence = Some(diverged(total, l.rec, l.kl, l2));
@@ -296,6 +315,7 @@ pub fn train(
                 }
                 _ => {
                     // The L2 term's gradient is applied by Adam (see `MeshVae::training_loss`).
+                    let t = std::time::Instant::now();
                     let loss = model.training_loss_cond(&x, c.as_ref(), &eps, &spec.train.loss)?;
                     let total = loss
                         .total
@@ -307,7 +327,8 @@ pub fn train(
                         break;
                     }
                     let grads = model.backward(&loss.total)?;
-                    adam.step_with_l2(&grads, w_l2)?;
+                    phases.forward_backward += t.elapsed().as_secs_f64();
+                    phases.time(|p| &mut p.adam, || adam.step_with_l2(&grads, w_l2))?;
                     (total, loss.rec, loss.kl, loss.l2)
                 }
             };
@@ -326,11 +347,14 @@ pub fn train(
         };
         let mut val_loss = None;
         if divergence.is_none() {
-            val_loss = loss_on(&data.split.val)?;
+            val_loss = phases.time(|p| &mut p.validation, || loss_on(&data.split.val))?;
             // The last step can leave non-finite weights behind a finite training loss.
             if let Some(v) = val_loss.filter(|v| !v.is_finite()) {
                 divergence = Some(format!("epoch {epoch}: the validation loss is {v}"));
-            } else if let Some(name) = rollback::non_finite_weight(&model)? {
+            } else if let Some(name) = phases.time(
+                |p| &mut p.bookkeeping,
+                || rollback::non_finite_weight(&model),
+            )? {
                 // The validation loss reads only the mean path: a broken σ branch passes it.
                 divergence = Some(format!("epoch {epoch}: weight {name} is not finite"));
             }
@@ -376,9 +400,12 @@ pub fn train(
         trained_since_rollback = true;
         // The schedule sees the loss that chooses the weights (validation, or training).
         let score = val_loss.unwrap_or(sums[0] / n);
-        let decision = progress
-            .schedule
-            .update(&schedule, score, order.chunks(batch).len());
+        let decision = progress.schedule.update(
+            &schedule,
+            score,
+            order.chunks(batch).len(),
+            adam.step_count(),
+        );
         if decision == Decision::Stop {
             stop = StopReason::Converged;
         }
@@ -388,7 +415,7 @@ pub fn train(
         let every = options.test_every_steps.max(1) as u64;
         let test_due = finished || adam.step_count() / every > steps_before / every;
         let test_loss = if test_due {
-            loss_on(&data.split.test)?
+            phases.time(|p| &mut p.test, || loss_on(&data.split.test))?
         } else {
             None
         };
@@ -429,6 +456,7 @@ pub fn train(
         progress.rng = rng.state();
         progress.seconds = prior_seconds + start.elapsed().as_secs_f64();
         // Before any checkpoint of this epoch: a resumed run truncates the log to its epoch.
+        let mut book = Instant::now();
         append_log(&folder.log(), &record)?;
         // A kill before these reach the folder replays the epochs since the last write and
         // finds the same bests again, so writing them early is safe.
@@ -456,9 +484,12 @@ pub fn train(
             } else {
                 StopReason::Interrupted
             };
-            folder.write_json(&folder.status(), &status(&progress, reason, &adam))?;
+            phases.bookkeeping += book.elapsed().as_secs_f64();
+            book = Instant::now();
+            folder.write_json(&folder.status(), &status(&progress, reason, &adam, phases))?;
             last_write = Instant::now();
         }
+        phases.bookkeeping += book.elapsed().as_secs_f64();
         let show = |l: Option<f64>| l.map_or("–".into(), |t| format!("{t:.3}"));
         // The bar's length is the budget; a run usually stops earlier, when the count of steps
         // without a new best reaches the patience.

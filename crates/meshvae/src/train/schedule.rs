@@ -34,6 +34,13 @@ pub struct Schedule {
     /// with the lowest loss itself.)
     #[serde(default)]
     pub smoothing_steps: usize,
+    /// After the warm-up the rate falls along a half cosine from `lr` to `lr · min_lr_ratio`
+    /// over this many steps, then stays there (0: no decay; the rate is cut on plateaus
+    /// instead). With a decay the plateau cuts are off and the run cannot stop before the
+    /// decay ends: it then stops, converged, once `patience` steps pass without a new best.
+    /// Models saved before it read as 0.
+    #[serde(default)]
+    pub decay_steps: usize,
 }
 
 impl Default for Schedule {
@@ -48,6 +55,23 @@ impl Default for Schedule {
             patience: 1500,
             min_improvement: 1e-3,
             smoothing_steps: 0,
+            decay_steps: 0,
+        }
+    }
+}
+
+impl Schedule {
+    /// The cosine schedule measured against the default (docs/benchmarks.md, "Training
+    /// schedule"): a 100-step warm-up, a decay to 1/32 of the rate over 1,500 steps, then a
+    /// stop once 300 steps pass without a new best (`meshvae train --warmup 100 --decay 1500
+    /// --patience 300`).
+    pub fn cosine() -> Self {
+        Self {
+            warmup_steps: 100,
+            lr_patience: 0,
+            patience: 300,
+            decay_steps: 1500,
+            ..Self::default()
         }
     }
 }
@@ -64,7 +88,26 @@ impl Schedule {
             patience: 0,
             min_improvement: 0.0,
             smoothing_steps: 0,
+            decay_steps: 0,
         }
+    }
+
+    /// The step after which the run may stop: the end of the warm-up and the decay.
+    pub fn annealed_at(&self) -> u64 {
+        match self.decay_steps {
+            0 => 0,
+            d => (self.warmup_steps + d) as u64,
+        }
+    }
+
+    /// The decay's factor at optimizer step `step` (1 without a decay).
+    fn decay(&self, step: u64) -> f64 {
+        if self.decay_steps == 0 {
+            return 1.0;
+        }
+        let t = step.saturating_sub(self.warmup_steps as u64) as f64 / self.decay_steps as f64;
+        let floor = self.min_lr_ratio;
+        floor + (1.0 - floor) * 0.5 * (1.0 + (std::f64::consts::PI * t.min(1.0)).cos())
     }
 
     /// Whether the run may stop before its budget.
@@ -183,11 +226,12 @@ impl ScheduleState {
         } else {
             1.0
         };
-        base_lr * self.scale * warm * rewarm
+        base_lr * self.scale * warm * rewarm * schedule.decay(step)
     }
 
-    /// Takes an epoch of `steps` steps that ended with validation loss `loss`.
-    pub fn update(&mut self, schedule: &Schedule, loss: f64, steps: usize) -> Decision {
+    /// Takes an epoch of `steps` steps that ended with validation loss `loss`, after `done`
+    /// optimizer steps in all.
+    pub fn update(&mut self, schedule: &Schedule, loss: f64, steps: usize, done: u64) -> Decision {
         let loss = if schedule.smoothing_steps == 0 || !loss.is_finite() {
             loss
         } else if !self.smoothed.is_finite() {
@@ -206,12 +250,13 @@ impl ScheduleState {
         }
         self.since_best += steps;
         self.since_cut += steps;
-        if schedule.stops_early() && self.since_best >= schedule.patience {
+        let annealed = done >= schedule.annealed_at();
+        if schedule.stops_early() && annealed && self.since_best >= schedule.patience {
             return Decision::Stop;
         }
         let floor = schedule.min_lr_ratio;
-        if schedule.lr_patience > 0 && self.since_cut >= schedule.lr_patience && self.scale > floor
-        {
+        let cuts = schedule.lr_patience > 0 && schedule.decay_steps == 0;
+        if cuts && self.since_cut >= schedule.lr_patience && self.scale > floor {
             self.scale = (self.scale * schedule.lr_factor).max(floor);
             self.since_cut = 0;
             self.cuts += 1;
@@ -297,6 +342,7 @@ mod tests {
             patience: 12,
             min_improvement: 0.01,
             smoothing_steps: 0,
+            decay_steps: 0,
         }
     }
 
@@ -314,20 +360,20 @@ mod tests {
     fn plateaus_cut_the_rate_down_to_the_floor_then_stop() {
         let s = schedule();
         let mut st = ScheduleState::default();
-        assert_eq!(st.update(&s, 10.0, 2), Decision::Continue);
+        assert_eq!(st.update(&s, 10.0, 2, 0), Decision::Continue);
         // Improvements smaller than 1 % do not count.
-        assert_eq!(st.update(&s, 9.95, 2), Decision::Continue);
+        assert_eq!(st.update(&s, 9.95, 2, 0), Decision::Continue);
         assert_eq!(st.since_best, 2);
-        assert_eq!(st.update(&s, 9.95, 2), Decision::CutRate);
+        assert_eq!(st.update(&s, 9.95, 2, 0), Decision::CutRate);
         assert_eq!((st.scale, st.cuts, st.since_cut), (0.5, 1, 0));
         // At the floor: no more cuts, and 12 steps without a best stop the run.
         for _ in 0..3 {
-            assert_eq!(st.update(&s, 9.99, 2), Decision::Continue);
+            assert_eq!(st.update(&s, 9.99, 2, 0), Decision::Continue);
         }
-        assert_eq!(st.update(&s, 9.99, 2), Decision::Stop);
+        assert_eq!(st.update(&s, 9.99, 2, 0), Decision::Stop);
         assert!(!st.still_improving(&s, 100));
         // A real improvement resets both counters but keeps the rate.
-        assert_eq!(st.update(&s, 5.0, 2), Decision::Continue);
+        assert_eq!(st.update(&s, 5.0, 2, 0), Decision::Continue);
         assert_eq!((st.since_best, st.since_cut, st.scale), (0, 0, 0.5));
         assert!(st.still_improving(&s, 100));
         assert_eq!(st.lr(&s, 1.0, 100), 0.5);
@@ -355,8 +401,8 @@ mod tests {
         };
         let (mut a, mut b) = (ScheduleState::default(), ScheduleState::default());
         for k in 0..200 {
-            a.update(&raw, loss(k), 1);
-            b.update(&smooth, loss(k), 1);
+            a.update(&raw, loss(k), 1, 0);
+            b.update(&smooth, loss(k), 1, 0);
         }
         assert_eq!(a.cuts, 0);
         assert!(b.cuts >= 1, "{b:?}");
@@ -369,8 +415,8 @@ mod tests {
     fn a_rollback_halves_the_rate_even_when_constant_and_restarts_the_counts() {
         let s = Schedule::constant();
         let mut st = ScheduleState::default();
-        st.update(&s, 10.0, 1);
-        st.update(&s, 11.0, 7);
+        st.update(&s, 10.0, 1, 0);
+        st.update(&s, 11.0, 7, 0);
         assert_eq!(st.since_best, 7);
         st.rollback(10);
         st.rollback(20);
@@ -402,7 +448,7 @@ mod tests {
         let s = Schedule::constant();
         let mut st = ScheduleState::default();
         for _ in 0..100 {
-            assert_eq!(st.update(&s, f64::NAN, 50), Decision::Continue);
+            assert_eq!(st.update(&s, f64::NAN, 50, 0), Decision::Continue);
         }
         assert_eq!(st.scale, 1.0);
         assert!(!st.still_improving(&s, 5000));
@@ -420,5 +466,40 @@ mod tests {
                 .to_string()
                 .contains("lr_factor")
         );
+    }
+
+    #[test]
+    fn a_cosine_decay_falls_to_the_floor_and_holds_the_stop_until_it_ends() {
+        let s = Schedule {
+            warmup_steps: 10,
+            lr_patience: 4,
+            lr_factor: 0.5,
+            min_lr_ratio: 0.01,
+            patience: 5,
+            min_improvement: 0.0,
+            smoothing_steps: 0,
+            decay_steps: 100,
+        };
+        let st = ScheduleState::default();
+        assert!((st.lr(&s, 1.0, 10) - 1.0).abs() < 1e-12);
+        // Half way down the cosine: the mean of the peak and the floor.
+        assert!((st.lr(&s, 1.0, 60) - 0.505).abs() < 1e-12);
+        assert!((st.lr(&s, 1.0, 110) - 0.01).abs() < 1e-12);
+        assert!((st.lr(&s, 1.0, 5_000) - 0.01).abs() < 1e-12);
+        // The rate falls monotonically after the warm-up.
+        let rates: Vec<f64> = (10..=120).map(|k| st.lr(&s, 1.0, k)).collect();
+        assert!(rates.windows(2).all(|w| w[1] <= w[0]));
+        assert_eq!(s.annealed_at(), 110);
+        // No plateau cuts during the decay, and no stop before it ends.
+        let mut st = ScheduleState::default();
+        assert_eq!(st.update(&s, 1.0, 1, 1), Decision::Continue);
+        for done in 2..110 {
+            assert_eq!(st.update(&s, 2.0, 1, done), Decision::Continue, "{done}");
+        }
+        assert_eq!((st.cuts, st.scale), (0, 1.0));
+        assert_eq!(st.update(&s, 2.0, 1, 110), Decision::Stop);
+        // A rollback still halves the rate on top of the decay.
+        st.rollback(500);
+        assert!((st.lr(&s, 1.0, 500 + REWARM_STEPS) - 0.005).abs() < 1e-12);
     }
 }

@@ -2,6 +2,7 @@
 
 use crate::error::Result;
 use crate::train::folder::ModelFolder;
+use crate::train::phases::PhaseSeconds;
 use crate::train::schedule::StopReason;
 use crate::train::split::Selection;
 use serde::{Deserialize, Serialize};
@@ -45,6 +46,10 @@ pub struct RunStatus {
     pub best_test_epoch: Option<usize>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub best_test_loss: Option<f64>,
+    /// Where the training time went, by phase (of this process's part of the run; absent from
+    /// older records).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phases: Option<PhaseSeconds>,
 }
 
 /// The folder's `run.json`, or `None` for a model trained before it existed.

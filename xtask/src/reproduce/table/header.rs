@@ -5,7 +5,7 @@ use crate::reproduce::Outcome;
 use crate::reproduce::plan::Budget;
 use crate::reproduce::run::RunResult;
 use crate::reproduce::stats::{Stat, sig, thousands};
-use meshvae::{Schedule, TrainConfig};
+use meshvae::TrainConfig;
 use std::fmt::Write;
 
 pub(super) fn header(md: &mut String, o: &Outcome) {
@@ -132,20 +132,49 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
 }
 
 /// "learning rate 1e-2 halved on plateaus, stop after 1,500 steps without a new best; budget
-/// 20,000 steps": `meshvae train`'s default training, from its settings.
+/// 20,000 steps" (or, with a decay, "… after a 100-step warm-up, falling along a cosine to 1/32
+/// of it over 1,500 steps, stop after 300 steps without a new best once it has …"):
+/// `meshvae train`'s default training, from its settings.
 pub(super) fn converged_training(max_steps: usize) -> String {
     let train = TrainConfig::default();
-    let schedule = Schedule::default();
-    let cut = if schedule.lr_factor == 0.5 {
-        "halved".to_string()
+    let schedule = train.schedule;
+    let warmup = match schedule.warmup_steps {
+        0 => String::new(),
+        w => format!(" after a {}-step warm-up", thousands(w)),
+    };
+    let rule = if schedule.decay_steps > 0 {
+        format!(
+            "{warmup}, falling along a cosine to 1/{} of it over {} steps, stop after {} steps \
+             without a new best once it has",
+            (1.0 / schedule.min_lr_ratio).round(),
+            thousands(schedule.decay_steps),
+            thousands(schedule.patience),
+        )
     } else {
-        format!("multiplied by {}", schedule.lr_factor)
+        let cut = if schedule.lr_factor == 0.5 {
+            "halved".to_string()
+        } else {
+            format!("multiplied by {}", schedule.lr_factor)
+        };
+        format!(
+            "{warmup} {cut} on plateaus, stop after {} steps without a new best",
+            thousands(schedule.patience)
+        )
+    };
+    // Said only where they are not the authors' (one rate, TF's β₂).
+    let heads = if train.head_lr_scale == 1.0 {
+        String::new()
+    } else {
+        format!(", the dense heads' at {} of it", train.head_lr_scale)
+    };
+    let beta2 = if train.adam_beta2 == 0.999 {
+        String::new()
+    } else {
+        format!("; Adam's β₂ {}", train.adam_beta2)
     };
     format!(
-        "learning rate {:e} {cut} on plateaus, stop after {} steps without a new best; budget {} \
-         steps",
+        "learning rate {:e}{rule}{heads}{beta2}; budget {} steps",
         train.lr,
-        thousands(schedule.patience),
         thousands(max_steps)
     )
 }

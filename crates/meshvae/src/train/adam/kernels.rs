@@ -25,6 +25,7 @@ pub(crate) enum GradSource<'a, T> {
 
 /// Adam's update with g ← g + l2·θ, in one pass over θ, m, v and g: the one CPU
 /// implementation, run by both the engine's step and candle's (`Adam::step_with_l2`).
+#[derive(Clone, Copy)]
 pub(super) struct FusedUpdate {
     pub beta1: f64,
     pub beta2: f64,
@@ -36,6 +37,14 @@ pub(super) struct FusedUpdate {
 }
 
 impl FusedUpdate {
+    /// The same update at `scale` times the rate.
+    pub(super) fn scaled(self, scale: f64) -> Self {
+        Self {
+            lr: self.lr * scale,
+            ..self
+        }
+    }
+
     /// Updates one slot's θ, m, v in place (CPU tensors of type `T`); returns ½Σθ² of θ
     /// before the update.
     pub(super) fn run_on<T: Real>(&self, s: &Slot, g: &GradSource<T>) -> Result<f64> {

@@ -272,3 +272,65 @@ fn a_restart_steps_as_a_fresh_optimiser_and_survives_the_state() {
     assert_eq!(max_diff(a.as_tensor(), &ua), 0.0);
     assert_eq!(resumed.step_count(), 10);
 }
+
+/// A variable given its own rate ([`Adam::scale_lr`]) takes the formula's step at that rate,
+/// on both update paths (gradient slices and candle's gradient store), and the others keep the
+/// optimiser's; unknown names and non-positive scales are refused.
+#[test]
+fn a_scaled_variable_steps_at_its_own_rate() {
+    let dev = Device::Cpu;
+    let theta0: Vec<f64> = vec![0.5, -1.25, 2.0, 0.75];
+    let g: Vec<f64> = vec![0.1, -0.2, 0.3, 5.0];
+    let var = || Var::from_tensor(&Tensor::from_vec(theta0.clone(), 4, &dev).unwrap()).unwrap();
+    let (lr, scale) = (1e-2, 0.1);
+    // The first step from zero moments is θ − rate·g/(|g| + ε).
+    let want = |rate: f64| -> Vec<f64> {
+        (0..4)
+            .map(|i| theta0[i] - rate * g[i] / (g[i].abs() + 1e-8))
+            .collect()
+    };
+    let close = |got: &Var, want: &[f64]| {
+        let got: Vec<f64> = got.as_tensor().to_vec1().unwrap();
+        assert!(
+            got.iter().zip(want).all(|(a, b)| (a - b).abs() <= 1e-12),
+            "{got:?} {want:?}"
+        );
+    };
+    let (head, other) = (var(), var());
+    let vars = vec![
+        ("head".to_string(), head.clone()),
+        ("other".to_string(), other.clone()),
+    ];
+    let mut adam = Adam::new(vars, lr).unwrap();
+    adam.scale_lr("head", scale).unwrap();
+    adam.step_with_slices(&[g.as_slice(), g.as_slice()], 0.0)
+        .unwrap();
+    close(&head, &want(lr * scale));
+    close(&other, &want(lr));
+
+    // Through a gradient store: the gradient of Σ g·θ is g.
+    let (head, other) = (var(), var());
+    let vars = vec![
+        ("head".to_string(), head.clone()),
+        ("other".to_string(), other.clone()),
+    ];
+    let mut adam = Adam::new(vars, lr).unwrap();
+    adam.scale_lr("head", scale).unwrap();
+    let gt = Tensor::from_vec(g.clone(), 4, &dev).unwrap();
+    let loss = ((head.as_tensor() * &gt).unwrap().sum_all().unwrap()
+        + (other.as_tensor() * &gt).unwrap().sum_all().unwrap())
+    .unwrap();
+    adam.step(&loss.backward().unwrap()).unwrap();
+    close(&head, &want(lr * scale));
+    close(&other, &want(lr));
+
+    assert!(
+        adam.scale_lr("nope", 0.5)
+            .unwrap_err()
+            .to_string()
+            .contains("nope")
+    );
+    for bad in [0.0, -1.0, f64::NAN] {
+        assert!(adam.scale_lr("head", bad).is_err());
+    }
+}
