@@ -296,26 +296,25 @@ fn a_scaled_variable_steps_at_its_own_rate() {
             "{got:?} {want:?}"
         );
     };
-    let (head, other) = (var(), var());
-    let vars = vec![
-        ("head".to_string(), head.clone()),
-        ("other".to_string(), other.clone()),
-    ];
-    let mut adam = Adam::new(vars, lr).unwrap();
-    adam.scale_lr("head", scale).unwrap();
+    // Two fresh variables, `head` at its own rate.
+    let fresh = || {
+        let (head, other) = (var(), var());
+        let vars = vec![
+            ("head".to_string(), head.clone()),
+            ("other".to_string(), other.clone()),
+        ];
+        let mut adam = Adam::new(vars, lr).unwrap();
+        adam.scale_lr("head", scale).unwrap();
+        (head, other, adam)
+    };
+    let (head, other, mut adam) = fresh();
     adam.step_with_slices(&[g.as_slice(), g.as_slice()], 0.0)
         .unwrap();
     close(&head, &want(lr * scale));
     close(&other, &want(lr));
 
     // Through a gradient store: the gradient of Σ g·θ is g.
-    let (head, other) = (var(), var());
-    let vars = vec![
-        ("head".to_string(), head.clone()),
-        ("other".to_string(), other.clone()),
-    ];
-    let mut adam = Adam::new(vars, lr).unwrap();
-    adam.scale_lr("head", scale).unwrap();
+    let (head, other, mut adam) = fresh();
     let gt = Tensor::from_vec(g.clone(), 4, &dev).unwrap();
     let loss = ((head.as_tensor() * &gt).unwrap().sum_all().unwrap()
         + (other.as_tensor() * &gt).unwrap().sum_all().unwrap())
