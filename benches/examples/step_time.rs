@@ -2,6 +2,9 @@
 //! a set's template at batch 32, f32, and prints one JSON line with the same keys as
 //! `benches/reference/pytorch_step.py`, so the two can be run one after the other in the same
 //! spell of the machine (its speed drifts by 20–50 % between spells; see docs/benchmarks.md).
+//! Beside them, the medians of the step's two phases (`forward_backward_ms`, `adam_ms`) and of
+//! an inference pass over two meshes (`inference_2_meshes_ms`: the validation pass of a
+//! horse-gallop run under the paper's split, every epoch).
 //!
 //! ```text
 //! cargo run --release -p meshvae-benches --example step_time -- horse-gallop [--steps 30]
@@ -77,6 +80,9 @@ fn run() -> Result<String, String> {
     let weights = LossWeights::default();
 
     let mut times = Vec::with_capacity(steps);
+    let (mut fwd_bwd, mut adam_ms, mut infer_small) = (Vec::new(), Vec::new(), Vec::new());
+    // The validation pass of a by-mesh split: two meshes, inference mode.
+    let x_small = x.narrow(0, 0, 2).map_err(|e| e.to_string())?;
     for _ in 0..steps {
         let eps = rng
             .normal_tensor((BATCH, config.latent), &device)
@@ -85,17 +91,33 @@ fn run() -> Result<String, String> {
         engine
             .forward_backward(&model, &x, &eps, &weights)
             .map_err(|e| e.to_string())?;
+        let mid = Instant::now();
         engine
             .apply_adam(&mut adam, weights.l2)
             .map_err(|e| e.to_string())?;
-        times.push(start.elapsed().as_secs_f64() * 1e3);
+        let end = Instant::now();
+        engine
+            .rec_error(&model, &x_small, &weights)
+            .map_err(|e| e.to_string())?;
+        infer_small.push(end.elapsed().as_secs_f64() * 1e3);
+        fwd_bwd.push((mid - start).as_secs_f64() * 1e3);
+        adam_ms.push((end - mid).as_secs_f64() * 1e3);
+        times.push((end - start).as_secs_f64() * 1e3);
     }
+    let median = |mut v: Vec<f64>| {
+        let mut kept = v.split_off(DROPPED);
+        kept.sort_by(f64::total_cmp);
+        kept[(kept.len() - 1) / 2]
+    };
+    let (fwd_bwd, adam_ms, infer_small) = (median(fwd_bwd), median(adam_ms), median(infer_small));
     let mut kept = times.split_off(DROPPED);
     kept.sort_by(f64::total_cmp);
     let quantile = |q: f64| kept[((kept.len() - 1) as f64 * q).round() as usize];
     Ok(format!(
         "{{\"vertices\": {v}, \"batch\": {BATCH}, \"threads\": {}, \"steps\": {}, \
-         \"median_ms\": {:.1}, \"p10_ms\": {:.1}, \"p90_ms\": {:.1}, \"peak_rss_mb\": {}}}",
+         \"median_ms\": {:.1}, \"p10_ms\": {:.1}, \"p90_ms\": {:.1}, \"peak_rss_mb\": {}, \
+         \"forward_backward_ms\": {fwd_bwd:.1}, \"adam_ms\": {adam_ms:.1}, \
+         \"inference_2_meshes_ms\": {infer_small:.1}}}",
         rayon_threads(),
         kept.len(),
         quantile(0.5),

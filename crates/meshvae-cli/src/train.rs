@@ -32,6 +32,10 @@ pub struct TrainArgs {
     /// 0 trains the whole budget [default: 1500].
     #[arg(long)]
     patience: Option<usize>,
+    /// A new best counts (for --patience) only when it lies this fraction below the best that
+    /// last counted [default: 0.001].
+    #[arg(long)]
+    min_improvement: Option<f64>,
     /// Halve the learning rate after this many steps without a new best (at most five times);
     /// 0 keeps it constant [default: 400].
     #[arg(long)]
@@ -273,6 +277,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         .unwrap_or(base_train.normalize_quantile);
     if let Some(p) = args.patience {
         train.schedule.patience = p;
+    }
+    if let Some(x) = args.min_improvement {
+        train.schedule.min_improvement = x;
     }
     if let Some(p) = args.lr_patience {
         train.schedule.lr_patience = p;

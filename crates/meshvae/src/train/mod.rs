@@ -374,7 +374,8 @@ pub fn train(
                 Some(rollback::tensors_of(&fresh))
             };
             trained_since_rollback = false;
-            let best = best.as_ref().map(|b| &b.weights);
+            let best = best.as_ref().map(|b| b.weights());
+            let best = best.as_ref();
             let recovery = Recovery {
                 what,
                 best,
@@ -466,7 +467,10 @@ pub fn train(
         }
         if improved {
             if keep_in_memory {
-                best = Some(BestState::capture(&model, &adam, &progress)?);
+                match best.as_mut() {
+                    Some(best) => best.recapture(&model, &adam, &progress)?,
+                    None => best = Some(BestState::capture(&model, &adam, &progress)?),
+                }
             } else {
                 write_current(&model, &adam, &progress, &folder)?;
             }

@@ -3,6 +3,7 @@
 //! decoding latent vectors, and reconstructions. None of them disturbs a pending training
 //! step's gradients.
 
+use super::latent::Heads;
 use super::{BnStats, Inputs, Net, cpu_slice, forward_node, with_weights};
 use crate::candle::model::MeshVae;
 use crate::cpu::kernels as k;
@@ -103,7 +104,12 @@ impl<T: Real> Net<T> {
             for node in &mut self.enc {
                 forward_node(node, &mut self.acts, w, batch, BnStats::Running)?;
             }
-            self.heads_forward(w, batch);
+            let heads = match pass {
+                Pass::Encoder => Heads::Both,
+                // ε = 0: z = μ whatever σ is.
+                Pass::Whole => Heads::MeanOnly,
+            };
+            self.heads_forward(w, batch, heads);
             if pass == Pass::Whole {
                 self.dense_decode(w, batch);
                 for node in &mut self.dec {

@@ -9,17 +9,25 @@ use crate::cpu::kernels as k;
 use crate::cpu::{Real, f64_of, of};
 use crate::train::loss::LossWeights;
 
+/// Which dense heads [`Net::heads_forward`] evaluates.
+#[derive(Clone, Copy, PartialEq)]
+pub(super) enum Heads {
+    Both,
+    MeanOnly,
+}
+
 impl<T: Real> Net<T> {
     /// μ, σ, z and the decoder's dense layer; returns the batch mean of the KL divergence.
     pub(super) fn latent_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
-        let kl = self.heads_forward(w, batch);
+        let kl = self.heads_forward(w, batch, Heads::Both);
         self.dense_decode(w, batch);
         kl
     }
 
     /// μ, σ and z = μ + σ ε from the encoder's output; returns the batch mean of the KL
-    /// divergence.
-    pub(super) fn heads_forward(&mut self, w: &[&[T]], batch: usize) -> f64 {
+    /// divergence. With [`Heads::MeanOnly`] (inference with ε = 0, where z = μ) the σ head is
+    /// skipped and σ = 1: a third of the dense weights' traffic in a validation pass.
+    pub(super) fn heads_forward(&mut self, w: &[&[T]], batch: usize, heads: Heads) -> f64 {
         let (l, kf) = (self.latent, self.flat);
         let d = &self.dense;
         let h = &self.acts.0[self.enc_out][..kf * batch];
@@ -31,7 +39,10 @@ impl<T: Real> Net<T> {
         );
         matmul(&mut lat.mu, (l, 1), h_rows, wm, (batch, l, kf), false);
         // The pre-activation of σ goes into `sig` first.
-        matmul(&mut lat.sig, (l, 1), h_rows, ws, (batch, l, kf), false);
+        match heads {
+            Heads::Both => matmul(&mut lat.sig, (l, 1), h_rows, ws, (batch, l, kf), false),
+            Heads::MeanOnly => lat.sig[..batch * l].fill(of(0.0)),
+        }
         // A conditional model adds c·W_c to both pre-activations.
         if let Some(labels) = d.labels {
             let c = Mat::row_major(&self.cond[..batch * labels.count], labels.count);
@@ -44,21 +55,27 @@ impl<T: Real> Net<T> {
                 dims,
                 true,
             );
-            matmul(
-                &mut lat.sig,
-                (l, 1),
-                c,
-                Mat::row_major(w[labels.sigma], l),
-                dims,
-                true,
-            );
+            if heads == Heads::Both {
+                matmul(
+                    &mut lat.sig,
+                    (l, 1),
+                    c,
+                    Mat::row_major(w[labels.sigma], l),
+                    dims,
+                    true,
+                );
+            }
         }
         let mut kl = 0.0;
         let two: T = of(2.0);
         for i in 0..batch * l {
             let j = i % l;
             let mu = lat.mu[i] + w[d.b_mu][j];
-            let s = f64_of(lat.sig[i] + w[d.b_sigma][j]);
+            let s = match heads {
+                Heads::Both => f64_of(lat.sig[i] + w[d.b_sigma][j]),
+                // sigmoid(s) = 1/2: σ = 1.
+                Heads::MeanOnly => 0.0,
+            };
             let sig: T = of(1.0 / (1.0 + (-s).exp()));
             let sigma = crate::numerics::real::Real::sqrt(sig * two);
             lat.mu[i] = mu;
