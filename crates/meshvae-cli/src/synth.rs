@@ -1,4 +1,4 @@
-//! `meshvae synth --out DIR [--seed S]`
+//! `meshvae synth --out DIR [--seed S] [--per-label N] [--rings R --segments S --cap-rings C]`
 
 use crate::CliError;
 use mesh_io::synth::{SynthConfig, generate};
@@ -15,6 +15,16 @@ pub struct SynthArgs {
     /// Meshes per label (`bend`, `twist`).
     #[arg(long, default_value_t = SynthConfig::default().meshes_per_label)]
     per_label: usize,
+    /// Rings of vertices along the capsule's cylinder (the default 40 gives 2,498 vertices with
+    /// the other defaults; vertices = 2 + segments × (rings + 2 × cap rings)).
+    #[arg(long, default_value_t = SynthConfig::default().rings)]
+    rings: usize,
+    /// Vertices around each ring.
+    #[arg(long, default_value_t = SynthConfig::default().segments)]
+    segments: usize,
+    /// Rings of each hemispherical cap.
+    #[arg(long, default_value_t = SynthConfig::default().cap_rings)]
+    cap_rings: usize,
 }
 
 pub fn run(args: &SynthArgs) -> Result<(), CliError> {
@@ -27,6 +37,9 @@ pub fn run(args: &SynthArgs) -> Result<(), CliError> {
     let config = SynthConfig {
         seed: args.seed,
         meshes_per_label: args.per_label,
+        rings: args.rings,
+        segments: args.segments,
+        cap_rings: args.cap_rings,
         ..SynthConfig::default()
     };
     let synth = generate(&config)?;

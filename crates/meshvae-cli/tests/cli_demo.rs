@@ -1,6 +1,7 @@
-//! `meshvae demo` end to end, tiny (146-vertex capsules, 2 epochs) so that it runs in seconds:
-//! every file it announces exists, pictures decode, meshes and the animation load, and a
-//! non-empty folder is refused unless --force, which leaves other files alone.
+//! `meshvae demo` end to end, tiny (146-vertex capsules) so that it runs in seconds: the model
+//! trains until it has converged, every file it announces exists, pictures decode, meshes and
+//! the animation load, and a non-empty folder is refused unless --force, which leaves other
+//! files alone.
 
 mod common;
 
@@ -36,7 +37,7 @@ fn the_demo_writes_every_picture_mesh_and_report_it_announces() {
     let out = dir.join("demo");
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("keep.txt"), "not the demo's").unwrap();
-    let args = ["demo", "--out", s(&out), "--epochs", "2", "--tiny"];
+    let args = ["demo", "--out", s(&out), "--tiny"];
 
     // A non-empty folder is refused, nothing written.
     fails_with(&meshvae(&args), 1, "--force");
@@ -50,6 +51,8 @@ fn the_demo_writes_every_picture_mesh_and_report_it_announces() {
     let stdout = ok(&meshvae(&[&args[..], &["--force"]].concat()));
     for part in [
         "$ meshvae train",
+        "until it has converged",
+        "stopped: converged",
         "test RMS",
         "mean shape",
         "Done in",
