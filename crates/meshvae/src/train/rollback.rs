@@ -109,7 +109,7 @@ fn all_finite(t: &Tensor) -> Result<bool> {
         let (storage, layout) = t.storage_and_layout();
         if let (Storage::Cpu(cpu), Some((lo, hi))) = (&*storage, layout.contiguous_offsets()) {
             match cpu {
-                CpuStorage::F32(v) => return Ok(v[lo..hi].iter().all(|x| x.is_finite())),
+                CpuStorage::F32(v) => return Ok(finite_f32(&v[lo..hi])),
                 CpuStorage::F64(v) => return Ok(v[lo..hi].iter().all(|x| x.is_finite())),
                 _ => {}
             }
@@ -121,6 +121,21 @@ fn all_finite(t: &Tensor) -> Result<bool> {
         .sum_all()?
         .to_scalar::<f64>()?;
     Ok(sum.is_finite())
+}
+
+/// Whether every value is finite, 8 lanes at a time: x − x is 0 for a finite x and NaN for an
+/// infinite or NaN one, and the lanes' sums keep a NaN (a short-circuiting `all` does not
+/// vectorise: checked once per epoch over 9.75 M weights it was 1.8 % of a horse-gallop run).
+fn finite_f32(v: &[f32]) -> bool {
+    let mut lanes = [0.0f32; 8];
+    let chunks = v.chunks_exact(8);
+    let tail = chunks.remainder();
+    for chunk in chunks {
+        for (l, &x) in lanes.iter_mut().zip(chunk) {
+            *l += x - x;
+        }
+    }
+    lanes.iter().all(|l| *l == 0.0) && tail.iter().all(|x| x.is_finite())
 }
 
 /// Every weight and batch-norm statistic of `model` by name (what [`MeshVae::set_tensors`]
@@ -146,6 +161,15 @@ mod tests {
         assert!(all_finite(&f32s(&[1.0, -2.0, f32::MAX])?).unwrap());
         assert!(!all_finite(&f32s(&[1.0, f32::NAN])?).unwrap());
         assert!(!all_finite(&f32s(&[f32::NEG_INFINITY, 0.0])?).unwrap());
+        // Past the 8-lane chunks, and in every lane of them.
+        for at in 0..19 {
+            let mut v = vec![1.5f32; 19];
+            assert!(all_finite(&f32s(&v)?).unwrap());
+            v[at] = f32::INFINITY;
+            assert!(!all_finite(&f32s(&v)?).unwrap(), "inf at {at}");
+            v[at] = f32::NAN;
+            assert!(!all_finite(&f32s(&v)?).unwrap(), "NaN at {at}");
+        }
         assert!(!all_finite(&Tensor::new(&[0.0f64, f64::INFINITY], cpu)?).unwrap());
         // A transposed view is not contiguous: the converted copy decides.
         let m = Tensor::new(&[[1.0f32, f32::NAN], [3.0, 4.0]], cpu)?.t()?;
