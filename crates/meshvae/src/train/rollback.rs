@@ -123,7 +123,7 @@ fn all_finite(t: &Tensor) -> Result<bool> {
     Ok(sum.is_finite())
 }
 
-/// Whether every value is finite, 8 lanes at a time: x − x is 0 for a finite x and NaN for an
+/// Whether every value is finite, 8 lanes at a time: 0·x is 0 for a finite x and NaN for an
 /// infinite or NaN one, and the lanes' sums keep a NaN (a short-circuiting `all` does not
 /// vectorise: checked once per epoch over 9.75 M weights it was 1.8 % of a horse-gallop run).
 fn finite_f32(v: &[f32]) -> bool {
@@ -132,7 +132,7 @@ fn finite_f32(v: &[f32]) -> bool {
     let tail = chunks.remainder();
     for chunk in chunks {
         for (l, &x) in lanes.iter_mut().zip(chunk) {
-            *l += x - x;
+            *l += x * 0.0;
         }
     }
     lanes.iter().all(|l| *l == 0.0) && tail.iter().all(|x| x.is_finite())
