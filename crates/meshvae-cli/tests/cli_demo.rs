@@ -121,3 +121,32 @@ fn the_demo_writes_every_picture_mesh_and_report_it_announces() {
     assert!(csv.starts_with("name,frame,") && csv.lines().next().unwrap().ends_with(",label"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn synth_writes_capsules_of_the_resolution_it_is_given() {
+    let dir = scratch("synth-resolution");
+    let out = dir.join("set");
+    let resolution = ["--rings", "16", "--segments", "24", "--cap-rings", "3"];
+    let args = [
+        &["synth", "--out", s(&out), "--per-label", "1"][..],
+        &resolution,
+    ]
+    .concat();
+    ok(&meshvae(&args));
+    let info: serde_json::Value =
+        serde_json::from_str(&ok(&meshvae(&["info", s(&out), "--json"]))).unwrap();
+    // 2 + segments × (rings + 2 × cap rings) vertices: the demo's capsule.
+    assert_eq!(
+        (info["meshes"].as_u64(), info["vertices"].as_u64()),
+        (Some(2), Some(530)),
+        "{info}"
+    );
+    let bad = dir.join("bad");
+    fails_with(
+        &meshvae(&["synth", "--out", s(&bad), "--rings", "1"]),
+        1,
+        "rings",
+    );
+    assert!(!bad.join("0000.obj").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
