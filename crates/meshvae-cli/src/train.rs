@@ -52,6 +52,10 @@ pub struct TrainArgs {
     /// pass without a new best); 0 cuts the rate on plateaus [default: 0].
     #[arg(long)]
     decay: Option<usize>,
+    /// Measure the validation loss only once this many steps have passed since the last
+    /// time (and at the end); 0 or 1 measures it after every epoch [default: 0].
+    #[arg(long)]
+    validate_every: Option<usize>,
     /// Adam's β₂ [default: 0.999, TF's and the authors'].
     #[arg(long)]
     beta2: Option<f64>,
@@ -292,6 +296,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     }
     if let Some(d) = args.decay {
         train.schedule.decay_steps = d;
+    }
+    if let Some(n) = args.validate_every {
+        train.schedule.validate_every_steps = n;
     }
     if let Some(b) = args.beta2 {
         train.adam_beta2 = b;

@@ -3,11 +3,12 @@
 
 mod common;
 
+use candle_core::Device;
 use common::{options, request, scratch, small_set};
 use meshvae::{
     DEFAULT_MAX_STEPS, EpochRecord, ExecutorKind, ModelFolder, RunStatus, SPIKE_FACTOR,
-    SPIKE_WINDOW, Schedule, StopReason, TrainOptions, TrainSummary, VaeError, loss_spikes,
-    read_log, read_status, train,
+    SPIKE_WINDOW, Schedule, StopReason, TrainOptions, TrainSummary, TrainedModel, VaeError,
+    loss_spikes, read_log, read_status, train,
 };
 
 #[test]
@@ -316,4 +317,62 @@ fn candle_runs_say_why() {
 
 fn options_resume() -> TrainOptions {
     options(true, false)
+}
+
+/// Validation every 10 steps: the steps are those of a run that validates every epoch (the
+/// pass changes no weight), the validation loss is measured only on the epochs that cross a
+/// multiple of 10 steps and on the last, and the chosen weights are those of one of them.
+#[test]
+fn validation_every_n_steps_measures_only_then_and_chooses_among_those_epochs() {
+    let set = small_set(7, 8);
+    let run = |name: &str, every: usize| {
+        let dir = scratch(name);
+        let mut req = request(&set, &dir, 1);
+        req.train.steps = Some(400);
+        req.train.schedule = Schedule {
+            decay_steps: 200,
+            patience: 60,
+            validate_every_steps: every,
+            ..Schedule::cosine()
+        };
+        let summary = train(&req, &options(false, false), |_| {}).unwrap();
+        let folder = ModelFolder::new(&dir);
+        let log = read_log(&folder.log()).unwrap();
+        (dir, summary, log)
+    };
+    let (dir_all, _, every_epoch) = run("validate-every-1", 0);
+    let (dir, summary, log) = run("validate-every-10", 10);
+    assert!(log.iter().all(|r| r.step > 0));
+    let per_epoch = log[0].step;
+    assert!(
+        per_epoch < 10,
+        "{per_epoch} steps an epoch: nothing to skip"
+    );
+    for (a, b) in log.iter().zip(&every_epoch) {
+        assert_eq!(
+            (a.step, a.train_loss),
+            (b.step, b.train_loss),
+            "epoch {}",
+            a.epoch
+        );
+    }
+    let mut before = 0;
+    for (i, r) in log.iter().enumerate() {
+        let due = r.step / 10 > before / 10 || i + 1 == log.len();
+        assert_eq!(
+            r.val_loss.is_some(),
+            due,
+            "epoch {} (step {})",
+            r.epoch,
+            r.step
+        );
+        before = r.step;
+    }
+    assert!(log.iter().filter(|r| r.val_loss.is_none()).count() > log.len() / 2);
+    let best = log.iter().find(|r| r.epoch == summary.best_epoch).unwrap();
+    assert!(best.val_loss.is_some(), "{best:?}");
+    let model = TrainedModel::load(&dir, &Device::Cpu).unwrap();
+    assert_eq!(model.epochs_trained().unwrap().1, summary.best_epoch);
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&dir_all);
 }

@@ -42,11 +42,12 @@ pub struct EpochRecord {
 }
 
 impl EpochRecord {
-    /// The loss `selection` ranks epochs by (the training loss where the validation loss is
-    /// missing; an epoch whose test loss was not measured never wins on the test loss).
+    /// The loss `selection` ranks epochs by (an epoch whose validation or test loss was not
+    /// measured never wins on it).
     pub fn score(&self, selection: Selection) -> f64 {
         match selection {
-            Selection::Validation => self.val_loss.unwrap_or(self.train_loss),
+            // An epoch without a validation pass was not a candidate.
+            Selection::Validation => self.val_loss.unwrap_or(f64::INFINITY),
             Selection::Train => self.train_loss,
             Selection::Test => self.test_loss.unwrap_or(f64::INFINITY),
         }

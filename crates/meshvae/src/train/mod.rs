@@ -244,6 +244,7 @@ pub fn train(
     // best weights themselves cannot train.
     let mut trained_since_rollback = true;
     let mut epoch = first_epoch;
+    let mut last_looked_at = adam.step_count();
     while epoch <= epochs {
         let t0 = Instant::now();
         let steps_before = adam.step_count();
@@ -345,8 +346,12 @@ pub fn train(
             let engine = engine.as_mut();
             epoch_loss(&model, &data, ids, batch, &spec.train.loss, device, engine)
         };
+        // Without validation meshes the score is the training loss, free to look at.
+        let looked_at = epoch == epochs
+            || data.split.val.is_empty()
+            || schedule.validation_due(steps_before, adam.step_count());
         let mut val_loss = None;
-        if divergence.is_none() {
+        if divergence.is_none() && looked_at {
             val_loss = phases.time(|p| &mut p.validation, || loss_on(&data.split.val))?;
             // The last step can leave non-finite weights behind a finite training loss.
             if let Some(v) = val_loss.filter(|v| !v.is_finite()) {
@@ -399,14 +404,18 @@ pub fn train(
             continue;
         }
         trained_since_rollback = true;
-        // The schedule sees the loss that chooses the weights (validation, or training).
+        // The schedule sees the loss that chooses the weights (validation, or training), and
+        // counts the steps since it last saw one.
         let score = val_loss.unwrap_or(sums[0] / n);
-        let decision = progress.schedule.update(
-            &schedule,
-            score,
-            order.chunks(batch).len(),
-            adam.step_count(),
-        );
+        let decision = if looked_at {
+            let steps = (adam.step_count() - last_looked_at) as usize;
+            last_looked_at = adam.step_count();
+            progress
+                .schedule
+                .update(&schedule, score, steps, adam.step_count())
+        } else {
+            Decision::Continue
+        };
         if decision == Decision::Stop {
             stop = StopReason::Converged;
         }
@@ -442,8 +451,8 @@ pub fn train(
             executor: Some(executor.kind),
             executor_reason: executor.reason.clone(),
         };
-        debug_assert_eq!(score, record.score(selection));
-        let improved = score < progress.best_loss;
+        debug_assert!(!looked_at || score == record.score(selection));
+        let improved = looked_at && score < progress.best_loss;
         if improved {
             progress.best_loss = score;
             progress.best_epoch = epoch;
@@ -475,7 +484,11 @@ pub fn train(
                 write_current(&model, &adam, &progress, &folder)?;
             }
         }
-        if finished || last_write.elapsed().as_secs_f64() >= options.checkpoint_seconds {
+        // Only after an epoch that looked at the loss: a resumed run then counts the steps
+        // since the last look from its checkpoint.
+        let write_due =
+            looked_at && last_write.elapsed().as_secs_f64() >= options.checkpoint_seconds;
+        if finished || write_due {
             if let Some(weights) = best_on_test.take() {
                 let (path, at) = (folder.weights_selected_on_test(), progress.best_test_epoch);
                 model.save_snapshot(&weights, &path, Some(at))?;

@@ -41,6 +41,15 @@ pub struct Schedule {
     /// Models saved before it read as 0.
     #[serde(default)]
     pub decay_steps: usize,
+    /// Measure the validation loss after an epoch only once this many optimizer steps have
+    /// passed since it was last measured (and after the last epoch); 0 or 1: after every
+    /// epoch. Where an epoch is one step (a set of 20 meshes), the validation pass and the
+    /// bookkeeping it triggers (the finite-weight check, the copy of a new best) cost a
+    /// quarter of the step; every length above counts steps, so looking every 10 steps
+    /// changes when the run notices a best by at most 10 steps. A split without validation
+    /// meshes looks at the training loss after every epoch. Models saved before it read as 0.
+    #[serde(default)]
+    pub validate_every_steps: usize,
 }
 
 impl Default for Schedule {
@@ -56,6 +65,7 @@ impl Default for Schedule {
             min_improvement: 1e-3,
             smoothing_steps: 0,
             decay_steps: 0,
+            validate_every_steps: 0,
         }
     }
 }
@@ -89,7 +99,15 @@ impl Schedule {
             min_improvement: 0.0,
             smoothing_steps: 0,
             decay_steps: 0,
+            validate_every_steps: 0,
         }
+    }
+
+    /// Whether the validation loss is due after an epoch that took the step count from
+    /// `before` to `after` (see [`Schedule::validate_every_steps`]).
+    pub fn validation_due(&self, before: u64, after: u64) -> bool {
+        let every = self.validate_every_steps.max(1) as u64;
+        after / every > before / every
     }
 
     /// The step after which the run may stop: the end of the warm-up and the decay.
@@ -343,7 +361,33 @@ mod tests {
             min_improvement: 0.01,
             smoothing_steps: 0,
             decay_steps: 0,
+            validate_every_steps: 0,
         }
+    }
+
+    #[test]
+    fn validation_is_due_when_an_epoch_crosses_a_multiple_of_its_steps() {
+        let every = |n| Schedule {
+            validate_every_steps: n,
+            ..schedule()
+        };
+        // 0 and 1: every epoch that took a step.
+        for s in [every(0), every(1)] {
+            assert!(s.validation_due(0, 1) && s.validation_due(7, 9));
+            assert!(!s.validation_due(5, 5));
+        }
+        let s = every(10);
+        assert!(!s.validation_due(0, 9));
+        assert!(s.validation_due(9, 10) && s.validation_due(8, 12));
+        assert!(!s.validation_due(10, 19));
+        // Epochs of 3 steps: at 12, 21 and 30, never twice for one multiple.
+        let due: Vec<u64> = (1..=10u64)
+            .filter(|k| s.validation_due(3 * k - 3, 3 * k))
+            .map(|k| 3 * k)
+            .collect();
+        assert_eq!(due, [12, 21, 30]);
+        // Epochs longer than 10 steps: every one.
+        assert!((1..20u64).all(|k| s.validation_due(15 * k - 15, 15 * k)));
     }
 
     #[test]
@@ -479,6 +523,7 @@ mod tests {
             min_improvement: 0.0,
             smoothing_steps: 0,
             decay_steps: 100,
+            validate_every_steps: 0,
         };
         let st = ScheduleState::default();
         assert!((st.lr(&s, 1.0, 10) - 1.0).abs() < 1e-12);
