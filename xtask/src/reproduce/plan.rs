@@ -354,6 +354,22 @@ impl Run {
         train
     }
 
+    /// The training settings assumed for a record of this run written before records kept
+    /// their settings: those of [`Self::train_config`] with the optimiser and schedule that
+    /// `meshvae train` used by default then (a rate of 1e-2 halved on plateaus, TF's β₂, one
+    /// rate for every weight, validation after every epoch). While the defaults are those, such a
+    /// record is reused; once they change, it is trained again.
+    pub fn unrecorded_train_config(&self) -> TrainConfig {
+        let mut train = self.train_config();
+        if let Budget::Converged { .. } = self.budget {
+            train.lr = 1e-2;
+            train.schedule = meshvae::Schedule::plateau();
+            train.adam_beta2 = 0.999;
+            train.head_lr_scale = 1.0;
+        }
+        train
+    }
+
     /// A short name for progress lines.
     pub fn name(&self) -> String {
         format!(

@@ -116,6 +116,15 @@ impl RunSettings {
             hierarchy: meshvae::hierarchy_config(model, HierarchyConfig::default()),
         }
     }
+
+    /// What a record of `run` without settings is taken to have trained with
+    /// ([`Run::unrecorded_train_config`]).
+    pub fn unrecorded(run: &Run, model: &ModelConfig) -> Self {
+        Self {
+            train: run.unrecorded_train_config(),
+            ..Self::of(run, model)
+        }
+    }
 }
 
 /// [`meshvae::CopySplit`] as a run records it.
@@ -137,11 +146,19 @@ impl RunResult {
     }
 
     /// Whether this result was produced by `run` (same data set, protocol, column, seed,
-    /// budget, kind of split and network, and the same settings where the record has them).
+    /// budget, kind of split and network, and the same settings; a record without settings
+    /// is taken to have trained with [`RunSettings::unrecorded`]).
     pub fn matches(&self, run: &Run, model: &ModelConfig) -> bool {
-        self.settings
-            .as_ref()
-            .is_none_or(|s| *s == RunSettings::of(run, model))
+        self.matches_settings(run, model, &RunSettings::of(run, model))
+    }
+
+    /// [`Self::matches`] against the settings `current` rather than today's.
+    pub fn matches_settings(&self, run: &Run, model: &ModelConfig, current: &RunSettings) -> bool {
+        let recorded = match &self.settings {
+            Some(s) => s.clone(),
+            None => RunSettings::unrecorded(run, model),
+        };
+        recorded == *current
             && self.dataset == run.dataset.name
             && self.protocol == run.protocol.id
             && self.column == run.column.id
@@ -435,8 +452,20 @@ mod tests {
         let plan = run(Budget::CONVERGED);
         record.step_budget = Some(DEFAULT_MAX_STEPS);
         let model = plan.column.model().unwrap();
-        // Records written before they kept their settings match on the rest.
+        // Records written before they kept their settings match on the rest while the
+        // defaults are those of that time, and not once they change.
         assert!(record.settings.is_none() && matches(&record, &plan));
+        let today = RunSettings::of(&plan, &model);
+        let changed = |edit: &dyn Fn(&mut RunSettings)| {
+            let mut current = today.clone();
+            edit(&mut current);
+            !record.matches_settings(&plan, &model, &current)
+        };
+        assert!(changed(&|s| s.train.lr = 5e-3));
+        assert!(changed(&|s| s.train.schedule = meshvae::Schedule::cosine()));
+        assert!(changed(&|s| s.train.schedule.validate_every_steps = 10));
+        assert!(changed(&|s| s.train.adam_beta2 = 0.99));
+        assert!(changed(&|s| s.train.head_lr_scale = 0.3));
         record.settings = Some(RunSettings::of(&plan, &model));
         assert!(matches(&record, &plan));
         // A default that changed since the run (the rate, the normalisation, the de-pooling)

@@ -53,9 +53,16 @@ pub struct Schedule {
 }
 
 impl Default for Schedule {
-    /// The measured defaults (docs/benchmarks.md, "Convergence"): the rate is halved after 400
-    /// steps without a new best (at most five times), and a run stops after 1,500.
+    /// [`Schedule::plateau`].
     fn default() -> Self {
+        Self::plateau()
+    }
+}
+
+impl Schedule {
+    /// Reduce on plateau, measured in docs/benchmarks.md ("Convergence"): the rate is halved
+    /// after 400 steps without a new best (at most five times), and a run stops after 1,500.
+    pub fn plateau() -> Self {
         Self {
             warmup_steps: 0,
             lr_patience: 400,
