@@ -1,7 +1,7 @@
 """A straightforward PyTorch 2 CPU implementation of the paper's network, timed per training step.
 
-Issue #6 sets meshvae's speed target against "what a researcher gets today from a
-straightforward PyTorch 2 CPU implementation of the same network" (2 threads, f32, batch 32).
+meshvae's speed target is set against "what a researcher gets today from a straightforward
+PyTorch 2 CPU implementation of the same network" (2 threads, f32, batch 32).
 This is that implementation, written the way CoMA's and SpiralNet++'s PyTorch code is: sparse
 Chebyshev recursion with `torch.sparse.mm`, `nn.BatchNorm1d`, `nn.Linear`, autograd and
 `torch.optim.Adam`, activations kept vertex-major (`[V, B, C]`, so the sparse products need no

@@ -1,4 +1,4 @@
-//! The conditional VAE's acceptance (issue #7): samples generated with label c have their
+//! The conditional VAE's acceptance test: samples generated with label c have their
 //! nearest training mesh among the meshes labelled c, for at least 80 % of the samples and for
 //! each label — on horse-gallop + horse-poses (`gallop` / `pose`, joined in code; skipped
 //! without the data) and on the synthetic bend / twist set.

@@ -4,8 +4,9 @@
 //! `spectral-conv` that is meant to preserve behaviour must leave every figure here equal to
 //! the bit.
 //!
-//! History (issue 25): the checksums of the engine's cases were recorded at 13b7995, before
-//! the restructuring, and have not moved since. Three deliberate changes re-recorded others:
+//! History: the checksums of the engine's cases were recorded at 13b7995, before the
+//! restructuring into one network description, and have not moved since. Three deliberate
+//! changes re-recorded others:
 //! - the engine took over tied and conditional models (the `-engine` cases are new; their
 //!   original cases stay, trained on candle's path with `engine: false`);
 //! - the applications' inference moved from candle's eval mode to the engine: the evaluation
@@ -253,10 +254,10 @@ const SYNTHETIC: &[&str] = &[
     "spatial da83e089af448578 0.2858233943057481 0.24694182308975124 0.28525852723873574",
     "spatial-candle e463a42b089ea3c6 0.2848684902036901 0.24691042567625454 0.2845618652813046",
     "tied-convs 02518de9c484d2a1 0.33999818266276605 0.3087501762300321 0.3351645133152641",
-    // Added when the engine began to cover tied decoder convolutions (issue 25).
+    // Added when the engine began to cover tied decoder convolutions.
     "tied-convs-engine c1aaee34e5fced4c 0.33999241969858895 0.3087380735834761 0.33517217737453575",
     "conditional 9d317402fe23c697 0.26906254681690633 0.25065393160289906 0.27754673588288864",
-    // Added when the engine began to cover conditional models (issue 25), not at 13b7995.
+    // Added when the engine began to cover conditional models, not at 13b7995.
     "conditional-engine 28e7b6ac4e339e1e 0.2690607314296441 0.25065463429533186 0.2775406507771589",
 ];
 
