@@ -52,6 +52,10 @@ pub struct TrainArgs {
     /// pass without a new best); 0 cuts the rate on plateaus [default: 0].
     #[arg(long)]
     decay: Option<usize>,
+    /// Scale a step's gradient down to K times the running mean of the recent gradient norms
+    /// when it is larger (a blow-up's first step); 0 never clips [default: 0].
+    #[arg(long, value_name = "K")]
+    clip: Option<f64>,
     /// Measure the validation loss only once this many steps have passed since the last
     /// time (and at the end); 0 or 1 measures it after every epoch [default: 0].
     #[arg(long)]
@@ -296,6 +300,9 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     }
     if let Some(d) = args.decay {
         train.schedule.decay_steps = d;
+    }
+    if let Some(k) = args.clip {
+        train.grad_clip = k;
     }
     if let Some(n) = args.validate_every {
         train.schedule.validate_every_steps = n;

@@ -85,7 +85,7 @@ pub use candle::model::{Encoded, MeshVae};
 pub use cpu::{Engine, StepLoss};
 
 // Training (`train/`): the loop, its optimiser, losses, schedule, data, split and checkpoints.
-pub use train::adam::{Adam, AdamConfig};
+pub use train::adam::{Adam, AdamConfig, GradClip};
 pub use train::checkpoint::{Checkpoint, Progress};
 pub use train::config::{
     DEFAULT_BETA2, DEFAULT_HEAD_LR_SCALE, DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE,

@@ -217,6 +217,12 @@ impl Engine {
         Ok(half_sq * l2)
     }
 
+    /// The norm of the last step's gradient (the L2 term's left out), as gradient clipping
+    /// reads it; the dense weights' part comes from Gram matrices, without forming them.
+    pub fn grad_norm(&self) -> f64 {
+        on_net!(&self.net, n => n.grad_norm())
+    }
+
     /// Copies of the last step's gradients, by variable name (for checks and tests).
     pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
         on_net!(&self.net, n => n.gradients())

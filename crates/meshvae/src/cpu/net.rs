@@ -461,7 +461,23 @@ impl<T: Real> Net<T> {
                 i => GradSource::Slice(&self.grads[i]),
             })
             .collect();
-        adam.step_with_sources(&grads, l2)
+        let grad_scale = match adam.grad_clip().is_on() {
+            true => adam.clip_scale(self.grad_norm()),
+            false => 1.0,
+        };
+        adam.step_with_sources(&grads, l2, grad_scale)
+    }
+
+    /// The norm of the last step's gradient over every trainable variable (the L2 term's
+    /// gradient left out, as Adam adds it).
+    pub fn grad_norm(&self) -> f64 {
+        let dense = [self.dense.w_mu, self.dense.w_sigma];
+        let rest: f64 = (self.grads.iter().enumerate())
+            .filter(|(i, _)| !dense.contains(i))
+            .flat_map(|(_, g)| g.iter())
+            .map(|&x| f64_of(x) * f64_of(x))
+            .sum();
+        (rest + self.dense_grad_sq()).sqrt()
     }
 
     pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {

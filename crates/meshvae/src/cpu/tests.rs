@@ -133,6 +133,22 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     );
     let ours_grads = engine.gradients().unwrap();
     assert_eq!(ours_grads.len(), reference.trainable_vars().len());
+    // The norm clipping reads (dense weights through Gram matrices) against the sum over
+    // candle's gradients.
+    let want_norm = reference
+        .trainable_vars()
+        .iter()
+        .map(|(_, var)| {
+            let g = values(grads.get(var.as_tensor()).unwrap());
+            g.iter().map(|x| x * x).sum::<f64>()
+        })
+        .sum::<f64>()
+        .sqrt();
+    let norm = engine.grad_norm();
+    assert!(
+        (norm - want_norm).abs() <= tol * want_norm,
+        "{case}: gradient norm {norm} vs {want_norm}"
+    );
     for ((name, var), (gname, g)) in reference.trainable_vars().iter().zip(&ours_grads) {
         assert_eq!(name, gname);
         let want = values(grads.get(var.as_tensor()).unwrap());
@@ -294,9 +310,14 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
 
 /// Runs `steps` Adam steps on one path; returns the weights.
 fn train(config: &ModelConfig, engine: bool, steps: usize) -> Vec<Vec<f64>> {
+    train_clipped(config, engine, steps, 0.0)
+}
+
+fn train_clipped(config: &ModelConfig, engine: bool, steps: usize, clip: f64) -> Vec<Vec<f64>> {
     let (model, _) = models(config, DType::F64);
     let weights = LossWeights::default();
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
+    adam.set_grad_clip(clip).unwrap();
     let mut e = engine.then(|| Engine::new(&model, 4).unwrap());
     for step in 0..steps {
         // The last batch is smaller, as at the end of an epoch.
@@ -356,6 +377,33 @@ fn training_steps_match_candle_and_repeat_bit_for_bit_on_any_thread_count() {
         assert_eq!(one, three, "{pool}");
         assert_eq!(one, ours, "{pool}");
     }
+}
+
+/// Gradient clipping: the engine (norm from Gram matrices) and candle (norm from the formed
+/// gradients) clip the same steps by the same factors, and clipping changed the run.
+#[test]
+fn clipped_training_steps_match_candle() {
+    let config = ModelConfig {
+        structure: "CPCPC".parse().unwrap(),
+        pool: Pooler::Max,
+        channels: 4,
+        latent: 6,
+        ..Default::default()
+    };
+    // A factor of 1 clips every step whose gradient exceeds the running mean, after the
+    // 20 steps of the mean's warm-up.
+    let steps = 26;
+    let reference = train_clipped(&config, false, steps, 1.0);
+    let ours = train_clipped(&config, true, steps, 1.0);
+    for (a, b) in ours.iter().zip(&reference) {
+        assert!(rel_diff(a, b, 1e-3) < 1e-9);
+    }
+    let unclipped = train(&config, true, steps);
+    let moved = ours
+        .iter()
+        .zip(&unclipped)
+        .any(|(a, b)| rel_diff(a, b, 1e-3) > 1e-9);
+    assert!(moved, "no step was clipped");
 }
 
 #[test]

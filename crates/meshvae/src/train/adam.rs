@@ -6,8 +6,10 @@
 //! Update, per variable θ with gradient g at step t:
 //! m ← β₁m + (1−β₁)g, v ← β₂v + (1−β₂)g², θ ← θ − lr · (m/(1−β₁ᵗ)) / (√(v/(1−β₂ᵗ)) + ε).
 
+mod clip;
 mod kernels;
 
+pub use clip::GradClip;
 pub(crate) use kernels::GradSource;
 
 use crate::error::{Result, VaeError};
@@ -58,12 +60,16 @@ pub struct Adam {
     step: u64,
     /// The step of the last [`Adam::restart`]: the bias correction counts from it.
     restarted_at: u64,
+    /// Clipping of the gradient's norm ([`Adam::set_grad_clip`]; off by default).
+    clip: GradClip,
 }
 
 /// Name of the step counter in [`Adam::state_tensors`].
 const STEP: &str = "adam.step";
 /// Name of the step of the last restart (written only after one, so older states still load).
 const RESTARTED_AT: &str = "adam.restarted_at";
+/// Name of the clipping rule's running mean (written only when clipping is on).
+const CLIP: &str = "adam.clip";
 
 impl Adam {
     /// An optimiser at step 0 over `vars` (e.g. `MeshVae::trainable_vars()`) with learning rate
@@ -110,7 +116,31 @@ impl Adam {
             slots,
             step: 0,
             restarted_at: 0,
+            clip: GradClip::new(0.0),
         })
+    }
+
+    /// Clips every step's gradient (the loss's, before the L2 term's is added) to `factor`
+    /// times the running mean of the recent gradient norms ([`GradClip`]); 0 turns it off.
+    pub fn set_grad_clip(&mut self, factor: f64) -> Result<()> {
+        if !(factor == 0.0 || (factor.is_finite() && factor >= 1.0)) {
+            return Err(VaeError::argument(
+                "grad_clip",
+                format!("{factor} is neither 0 (off) nor a factor ≥ 1"),
+            ));
+        }
+        self.clip = GradClip::new(factor);
+        Ok(())
+    }
+
+    /// The clipping rule and its running mean.
+    pub fn grad_clip(&self) -> &GradClip {
+        &self.clip
+    }
+
+    /// The factor this step's gradient is scaled by, given its norm (1 without clipping).
+    pub(crate) fn clip_scale(&mut self, norm: f64) -> f64 {
+        self.clip.scale(norm)
     }
 
     pub fn config(&self) -> &AdamConfig {
@@ -165,7 +195,7 @@ impl Adam {
 
     /// Counts a step and returns its update: the rate, the moments' decays and their bias
     /// corrections, and the L2 weight.
-    fn next_update(&mut self, l2: f64) -> FusedUpdate {
+    fn next_update(&mut self, l2: f64, grad_scale: f64) -> FusedUpdate {
         self.step += 1;
         let AdamConfig {
             lr,
@@ -182,6 +212,7 @@ impl Adam {
             lr,
             eps,
             l2,
+            grad_scale,
         }
     }
 
@@ -200,7 +231,18 @@ impl Adam {
     /// [`Self::step`] on the full loss, without autograd holding a parameter-sized L2 gradient
     /// (and its sum with the others) for every variable at once.
     pub fn step_with_l2(&mut self, grads: &GradStore, l2: f64) -> Result<()> {
-        let update = self.next_update(l2);
+        let mut grad_scale = 1.0;
+        if self.clip.is_on() {
+            let mut sq = 0.0;
+            for slot in &self.slots {
+                if let Some(g) = grads.get(&slot.var) {
+                    let g = g.to_dtype(DType::F64)?;
+                    sq += g.sqr()?.sum_all()?.to_scalar::<f64>()?;
+                }
+            }
+            grad_scale = self.clip.scale(sq.sqrt());
+        }
+        let update = self.next_update(l2, grad_scale);
         let FusedUpdate {
             beta1,
             beta2,
@@ -226,6 +268,13 @@ impl Adam {
                 continue;
             }
             // Other devices and dtypes: the same arithmetic as candle ops.
+            let scaled;
+            let g = if grad_scale != 1.0 {
+                scaled = g.affine(grad_scale, 0.0)?;
+                &scaled
+            } else {
+                g
+            };
             let with_l2;
             let g = if l2 != 0.0 {
                 with_l2 = (g + slot.var.as_tensor().affine(l2, 0.0)?)?;
@@ -258,15 +307,17 @@ impl Adam {
     #[cfg(test)]
     pub(crate) fn step_with_slices<T: Real>(&mut self, grads: &[&[T]], l2: f64) -> Result<f64> {
         let sources: Vec<GradSource<'_, T>> = grads.iter().map(|g| GradSource::Slice(g)).collect();
-        self.step_with_sources(&sources, l2)
+        self.step_with_sources(&sources, l2, 1.0)
     }
 
     /// [`Self::step_with_slices`] where a gradient may also be made row block by row block
-    /// as the pass reaches it ([`GradSource::Rows`]), never written out whole.
+    /// as the pass reaches it ([`GradSource::Rows`]), never written out whole, and every
+    /// gradient is scaled by `grad_scale` first ([`Self::clip_scale`]).
     pub(crate) fn step_with_sources<T: Real>(
         &mut self,
         grads: &[GradSource<'_, T>],
         l2: f64,
+        grad_scale: f64,
     ) -> Result<f64> {
         if grads.len() != self.slots.len() {
             return Err(VaeError::argument(
@@ -294,7 +345,7 @@ impl Adam {
                 ),
             ));
         }
-        let update = self.next_update(l2);
+        let update = self.next_update(l2, grad_scale);
         let mut half_sq = 0.0;
         for (s, g) in self.slots.iter().zip(grads) {
             half_sq += update.scaled(s.lr_scale).run_on(s, g)?;
@@ -327,6 +378,9 @@ impl Adam {
                 RESTARTED_AT.to_owned(),
                 Tensor::new(&[self.restarted_at as i64], &device)?,
             ));
+        }
+        if self.clip.is_on() {
+            out.push((CLIP.to_owned(), Tensor::new(&self.clip.state(), &device)?));
         }
         for s in &self.slots {
             out.push((format!("adam.m.{}", s.name), take(s.m.as_tensor())?));
@@ -380,7 +434,20 @@ impl Adam {
             };
             moments.push((get("m")?, get("v")?));
         }
-        let known = 1 + 2 * self.slots.len() + usize::from(restarted_at.is_some());
+        // A state saved with clipping off (or before it existed) starts the mean afresh.
+        let clip = match tensors.get(CLIP) {
+            Some(t) => {
+                let state = t.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?;
+                Some(self.clip.with_state(&state).ok_or_else(|| {
+                    VaeError::argument("adam state", format!("{CLIP} is not a clipping state"))
+                })?)
+            }
+            None => None,
+        };
+        let known = 1
+            + 2 * self.slots.len()
+            + usize::from(restarted_at.is_some())
+            + usize::from(clip.is_some());
         let ours = tensors.keys().filter(|k| k.starts_with("adam.")).count();
         if ours != known {
             return Err(VaeError::argument(
@@ -394,6 +461,7 @@ impl Adam {
         }
         self.step = step;
         self.restarted_at = restarted_at.unwrap_or(0);
+        self.clip = clip.unwrap_or(GradClip::new(self.clip.factor));
         Ok(())
     }
 }

@@ -63,6 +63,10 @@ pub struct TrainConfig {
     /// summing 27. Models saved before the option read as 1.
     #[serde(default = "one")]
     pub head_lr_scale: f64,
+    /// Clip each step's gradient to this many times the running mean of the recent gradient
+    /// norms (0: never; see [`crate::GradClip`]). Models saved before the option read as 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub grad_clip: f64,
 }
 
 fn one() -> f64 {
@@ -106,6 +110,7 @@ impl Default for TrainConfig {
             normalize_quantile: DEFAULT_NORMALIZE_QUANTILE,
             adam_beta2: DEFAULT_BETA2,
             head_lr_scale: DEFAULT_HEAD_LR_SCALE,
+            grad_clip: 0.0,
         }
     }
 }
@@ -158,6 +163,12 @@ impl TrainConfig {
             return Err(VaeError::argument(
                 "head_lr_scale",
                 format!("{} is not positive", self.head_lr_scale),
+            ));
+        }
+        if !(self.grad_clip == 0.0 || (self.grad_clip.is_finite() && self.grad_clip >= 1.0)) {
+            return Err(VaeError::argument(
+                "grad_clip",
+                format!("{} is neither 0 (off) nor a factor ≥ 1", self.grad_clip),
             ));
         }
         if self.batch == 0 {
@@ -231,6 +242,14 @@ mod tests {
             };
             let err = config.validate().unwrap_err().to_string();
             assert!(err.contains("head_lr_scale"), "{err}");
+        }
+        for bad in [0.5, -1.0, f64::NAN, f64::INFINITY] {
+            let config = TrainConfig {
+                grad_clip: bad,
+                ..TrainConfig::default()
+            };
+            let err = config.validate().unwrap_err().to_string();
+            assert!(err.contains("grad_clip"), "{err}");
         }
         assert!(TrainConfig::default().validate().is_ok());
     }

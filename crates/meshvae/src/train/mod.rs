@@ -108,6 +108,7 @@ pub fn train(
             adam.scale_lr(name, spec.train.head_lr_scale)?;
         }
     }
+    adam.set_grad_clip(spec.train.grad_clip)?;
     if let Some(files) = &files {
         write_model_files(&folder, &spec, &hierarchy, &data, files)?;
     }

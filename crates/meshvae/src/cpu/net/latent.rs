@@ -186,6 +186,49 @@ impl<T: Real> Net<T> {
         matmul(gb, (batch, 1), ws, ds_cols, (kf, batch, l), true);
     }
 
+    /// ‖dW_μ‖² + ‖dW_σ‖² of the last step without forming them. Both are sums over the batch
+    /// of outer products p_b q_bᵀ, so ‖Σ_b p_b q_bᵀ‖² = Σ_{b,b'} (p_b·p_b')(q_b·q_b'): batch ×
+    /// batch Gram matrices of g, h (over V_L·C rows) and of z, ∂L/∂μ, ∂L/∂s (over the latent
+    /// units), a few MFLOP where forming the gradients takes about 1 GFLOP.
+    pub(super) fn dense_grad_sq(&self) -> f64 {
+        let (l, batch, kf) = (self.latent, self.batch, self.flat);
+        let lat = &self.lat;
+        let h = &self.acts.0[self.enc_out][..kf * batch];
+        let g = &self.dec_grad[..kf * batch];
+        // [B, V_L·C] · [V_L·C, B] from the row-major [V_L·C, B] buffers.
+        let gram = |a: &[T], b: &[T]| {
+            let mut out = vec![of(0.0); batch * batch];
+            let (at, b) = (Mat::col_major(a, batch), Mat::row_major(b, batch));
+            matmul(&mut out, (batch, 1), at, b, (batch, batch, kf), false);
+            out
+        };
+        let (hh, gg, gh) = (gram(h, h), gram(g, g), gram(g, h));
+        // The same over the latent units of the row-major [B, L] buffers, in f64.
+        let latent_gram = |a: &[T], b: &[T]| {
+            let mut out = vec![0.0f64; batch * batch];
+            for (i, o) in out.iter_mut().enumerate() {
+                let (x, y) = (&a[(i / batch) * l..][..l], &b[(i % batch) * l..][..l]);
+                *o = x.iter().zip(y).map(|(&p, &q)| f64_of(p) * f64_of(q)).sum();
+            }
+            out
+        };
+        let (z, dmu, ds) = (
+            &lat.z[..batch * l],
+            &lat.dmu[..batch * l],
+            &lat.ds[..batch * l],
+        );
+        let (zz, mm, ss, zm) = (
+            latent_gram(z, z),
+            latent_gram(dmu, dmu),
+            latent_gram(ds, ds),
+            latent_gram(z, dmu),
+        );
+        let dot =
+            |p: &[T], q: &[f64]| -> f64 { p.iter().zip(q).map(|(&a, &b)| f64_of(a) * b).sum() };
+        // dW_μ = g zᵀ + h (∂L/∂μ)ᵀ: both squares and twice the cross term; dW_σ = h (∂L/∂s)ᵀ.
+        dot(&gg, &zz) + dot(&hh, &mm) + 2.0 * dot(&gh, &zm) + dot(&hh, &ss)
+    }
+
     /// Rows `first..` of the last step's gradient of the dense weight `var` (`w_mu` or
     /// `w_sigma`, row-major `[V_L·C, latent]`) into `out` (whole rows), on this thread:
     /// dW_μ = g zᵀ + h (∂L/∂μ)ᵀ (the decoder's tied use, then the encoder's), dW_σ = h (∂L/∂s)ᵀ.

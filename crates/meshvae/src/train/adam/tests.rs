@@ -165,7 +165,7 @@ fn row_sources_update_like_slices() {
             row_len: cols,
             fill: &fill,
         };
-        let y = by_rows.step_with_sources(&[rows_source], 0.3).unwrap();
+        let y = by_rows.step_with_sources(&[rows_source], 0.3, 1.0).unwrap();
         assert!((x - y).abs() <= 1e-12 * x, "{x} vs {y}");
     }
     let values = |v: &Var| -> Vec<f32> { v.as_tensor().flatten_all().unwrap().to_vec1().unwrap() };
@@ -183,7 +183,7 @@ fn row_sources_update_like_slices() {
             row_len,
             fill: &fill,
         };
-        let e = by_rows.step_with_sources(&[bad], 0.0).unwrap_err();
+        let e = by_rows.step_with_sources(&[bad], 0.0, 1.0).unwrap_err();
         assert!(e.to_string().contains("rows of"), "{e}");
     }
 }
@@ -331,5 +331,56 @@ fn a_scaled_variable_steps_at_its_own_rate() {
     );
     for bad in [0.0, -1.0, f64::NAN] {
         assert!(adam.scale_lr("head", bad).is_err());
+    }
+}
+
+/// A clipped step equals the plain step on the scaled gradient (a power of two, so exactly),
+/// the L2 term's gradient unscaled; the clipping state goes into the checkpoint's tensors and
+/// back, and a bad factor is refused by name.
+#[test]
+fn a_clipped_step_scales_the_gradient_and_its_state_round_trips() {
+    let make = |name: &str| {
+        let v = Var::from_vec(
+            (0..64)
+                .map(|i| (i as f32 * 0.37).sin())
+                .collect::<Vec<f32>>(),
+            64,
+            &Device::Cpu,
+        )
+        .unwrap();
+        (
+            Adam::new(vec![(name.to_string(), v.clone())], 1e-2).unwrap(),
+            v,
+        )
+    };
+    let g: Vec<f32> = (0..64).map(|i| (i as f32 * 0.11).cos()).collect();
+    let half: Vec<f32> = g.iter().map(|x| x * 0.5).collect();
+    let (mut a, va) = make("w");
+    let (mut b, vb) = make("w");
+    a.step_with_sources(&[GradSource::Slice(&g)], 0.3, 0.5)
+        .unwrap();
+    b.step_with_slices(&[half.as_slice()], 0.3).unwrap();
+    let values = |v: &Var| -> Vec<f32> { v.as_tensor().to_vec1().unwrap() };
+    assert_eq!(values(&va), values(&vb));
+
+    let (mut c, _) = make("w");
+    c.set_grad_clip(2.0).unwrap();
+    for k in 0..25 {
+        c.clip_scale(1.0 + k as f64);
+    }
+    let state: HashMap<String, Tensor> = c.state_tensors().unwrap().into_iter().collect();
+    assert!(state.contains_key("adam.clip"));
+    let (mut d, _) = make("w");
+    d.set_grad_clip(2.0).unwrap();
+    d.load_state(&state).unwrap();
+    assert_eq!(d.grad_clip(), c.grad_clip());
+    // A state without it (clipping was off) starts the mean afresh.
+    let (plain, _) = make("w");
+    let state: HashMap<String, Tensor> = plain.state_tensors().unwrap().into_iter().collect();
+    d.load_state(&state).unwrap();
+    assert_eq!(*d.grad_clip(), GradClip::new(2.0));
+    for bad in [0.5, -1.0, f64::NAN] {
+        let e = d.set_grad_clip(bad).unwrap_err().to_string();
+        assert!(e.contains("grad_clip"), "{e}");
     }
 }
