@@ -21,7 +21,7 @@ pub struct EvalArgs {
     /// test_unseen_mean_distance_rigid (null unless the split put copies of test shapes among
     /// the training meshes), params,
     /// params_without_biases, epochs, best_epoch, selected_on, stop_reason, steps,
-    /// still_improving, train_seconds, rollbacks, phases (seconds by phase of training), loss_spike_epochs (epochs whose training
+    /// still_improving, train_seconds, rollbacks, clipped_steps (null without --clip), phases (seconds by phase of training), loss_spike_epochs (epochs whose training
     /// loss exceeds 3× the median of the 50 before them), vertices, test_meshes, val_meshes, train_meshes,
     /// split_by_shape, loss_plot, warnings: [{kind, message}] when the test error is not clearly
     /// below the mean training shape's or training was cut while still improving).
@@ -86,6 +86,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "still_improving": status.as_ref().map(|s| s.still_improving),
         "train_seconds": status.as_ref().map(|s| s.seconds),
         "rollbacks": status.as_ref().map(|s| s.rollbacks),
+        "clipped_steps": status.as_ref().and_then(|s| s.clipped_steps),
         "phases": status.as_ref().and_then(|s| s.phases),
         "loss_spike_epochs": spikes,
         "loss_plot": loss_plot.as_ref().map(|p| p.display().to_string()),
@@ -188,6 +189,9 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
             p.test,
             p.bookkeeping
         );
+    }
+    if let Some(n) = status.as_ref().and_then(|s| s.clipped_steps) {
+        out!("  clipped      {n} steps (gradient above --clip × its running mean)");
     }
     let rollbacks = status.as_ref().map_or(0, |s| s.rollbacks);
     if rollbacks > 0 || !spikes.is_empty() {

@@ -320,7 +320,7 @@ fn options_resume() -> TrainOptions {
 }
 
 /// Validation every 10 steps: the steps are those of a run that validates every epoch (the
-/// pass changes no weight), the validation loss is measured only on the epochs that cross a
+/// pass changes no weight, and gradient clipping does not depend on it), the validation loss is measured only on the epochs that cross a
 /// multiple of 10 steps and on the last, and the chosen weights are those of one of them.
 #[test]
 fn validation_every_n_steps_measures_only_then_and_chooses_among_those_epochs() {
@@ -335,6 +335,8 @@ fn validation_every_n_steps_measures_only_then_and_chooses_among_those_epochs() 
             validate_every_steps: every,
             ..Schedule::cosine()
         };
+        // Clipping at the running mean itself: it acts on many steps, the same ones in both.
+        req.train.grad_clip = 1.0;
         let summary = train(&req, &options(false, false), |_| {}).unwrap();
         let folder = ModelFolder::new(&dir);
         let log = read_log(&folder.log()).unwrap();
@@ -373,6 +375,13 @@ fn validation_every_n_steps_measures_only_then_and_chooses_among_those_epochs() 
     assert!(best.val_loss.is_some(), "{best:?}");
     let model = TrainedModel::load(&dir, &Device::Cpu).unwrap();
     assert_eq!(model.epochs_trained().unwrap().1, summary.best_epoch);
+    let status = read_status(&ModelFolder::new(&dir)).unwrap().unwrap();
+    let clipped = status.clipped_steps.unwrap();
+    assert!(
+        clipped > 0 && clipped < summary.steps,
+        "{clipped} of {}",
+        summary.steps
+    );
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&dir_all);
 }

@@ -147,6 +147,7 @@ mod tests {
             lr: 1e-2,
             lr_cuts: 0,
             rollbacks: 0,
+            clipped_steps: None,
             seconds: 3.0,
             path: "engine".into(),
             executor_reason: None,

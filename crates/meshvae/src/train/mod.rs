@@ -198,6 +198,7 @@ pub fn train(
         lr: adam.config().lr,
         lr_cuts: progress.schedule.cuts,
         rollbacks: progress.schedule.rollbacks,
+        clipped_steps: adam.grad_clip().is_on().then(|| adam.grad_clip().clipped()),
         seconds: progress.seconds,
         path: executor.kind.to_string(),
         executor_reason: executor.reason.clone(),

@@ -32,6 +32,9 @@ pub struct RunStatus {
     /// at half the rate (counted in `lr_cuts` too).
     #[serde(default)]
     pub rollbacks: usize,
+    /// Steps whose gradient was clipped (`--clip`; absent when clipping was off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clipped_steps: Option<u64>,
     /// Seconds of training over every resumed part.
     pub seconds: f64,
     /// What computed the steps: `engine` (the hand-written CPU step) or `candle` (autograd).

@@ -22,8 +22,9 @@ pub struct GradClip {
     pub factor: f64,
     /// The running mean of the norms as clipped, without its bias correction.
     sum: f64,
-    /// Norms seen.
+    /// Norms seen, and how many of them were clipped.
     seen: u64,
+    clipped: u64,
 }
 
 impl GradClip {
@@ -33,7 +34,13 @@ impl GradClip {
             factor,
             sum: 0.0,
             seen: 0,
+            clipped: 0,
         }
+    }
+
+    /// Steps clipped so far.
+    pub fn clipped(&self) -> u64 {
+        self.clipped
     }
 
     pub fn is_on(&self) -> bool {
@@ -65,24 +72,25 @@ impl GradClip {
         };
         self.sum = DECAY * self.sum + (1.0 - DECAY) * norm * scale;
         self.seen += 1;
+        self.clipped += u64::from(scale < 1.0);
         scale
     }
 
-    /// The state as two numbers, for a checkpoint.
-    pub fn state(&self) -> [f64; 2] {
-        [self.sum, self.seen as f64]
+    /// The state as three numbers, for a checkpoint.
+    pub fn state(&self) -> [f64; 3] {
+        [self.sum, self.seen as f64, self.clipped as f64]
     }
 
     /// Restores [`Self::state`]; `None` if it is not a state.
     pub fn with_state(self, state: &[f64]) -> Option<Self> {
+        let count = |x: f64| (x >= 0.0 && x.fract() == 0.0).then_some(x as u64);
         match *state {
-            [sum, seen] if sum.is_finite() && sum >= 0.0 && seen >= 0.0 && seen.fract() == 0.0 => {
-                Some(Self {
-                    sum,
-                    seen: seen as u64,
-                    ..self
-                })
-            }
+            [sum, seen, clipped] if sum.is_finite() && sum >= 0.0 => Some(Self {
+                sum,
+                seen: count(seen)?,
+                clipped: count(clipped)?,
+                ..self
+            }),
             _ => None,
         }
     }
@@ -118,6 +126,7 @@ mod tests {
         let seen = c.state()[1] as i32;
         assert!((c.mean() - sum / (1.0 - DECAY.powi(seen))).abs() < 1e-12);
         assert!(c.mean() < 1.2 * before, "the spike entered the mean whole");
+        assert_eq!(c.clipped(), 1);
         // A non-finite norm is not stepped on; off, nothing is scaled.
         assert_eq!(c.scale(f64::INFINITY), 0.0);
         let mut off = GradClip::new(0.0);
@@ -132,8 +141,12 @@ mod tests {
         }
         let back = GradClip::new(3.0).with_state(&c.state()).unwrap();
         assert_eq!(back, c);
-        assert!(GradClip::new(3.0).with_state(&[1.0]).is_none());
-        assert!(GradClip::new(3.0).with_state(&[f64::NAN, 2.0]).is_none());
-        assert!(GradClip::new(3.0).with_state(&[1.0, 2.5]).is_none());
+        assert!(GradClip::new(3.0).with_state(&[1.0, 2.0]).is_none());
+        assert!(
+            GradClip::new(3.0)
+                .with_state(&[f64::NAN, 2.0, 0.0])
+                .is_none()
+        );
+        assert!(GradClip::new(3.0).with_state(&[1.0, 2.5, 0.0]).is_none());
     }
 }
