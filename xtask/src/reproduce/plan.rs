@@ -357,7 +357,7 @@ impl Run {
     /// The training settings assumed for a record of this run written before records kept
     /// their settings: those of [`Self::train_config`] with the optimiser and schedule that
     /// `meshvae train` used by default then (a rate of 1e-2 halved on plateaus, TF's β₂, one
-    /// rate for every weight, validation after every epoch). While the defaults are those, such a
+    /// rate for every weight, no gradient clipping, validation after every epoch). While the defaults are those, such a
     /// record is reused; once they change, it is trained again.
     pub fn unrecorded_train_config(&self) -> TrainConfig {
         let mut train = self.train_config();
@@ -366,6 +366,7 @@ impl Run {
             train.schedule = meshvae::Schedule::plateau();
             train.adam_beta2 = 0.999;
             train.head_lr_scale = 1.0;
+            train.grad_clip = 0.0;
         }
         train
     }

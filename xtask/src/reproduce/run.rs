@@ -466,6 +466,7 @@ mod tests {
         assert!(changed(&|s| s.train.schedule.validate_every_steps = 10));
         assert!(changed(&|s| s.train.adam_beta2 = 0.99));
         assert!(changed(&|s| s.train.head_lr_scale = 0.3));
+        assert!(changed(&|s| s.train.grad_clip = 2.0));
         record.settings = Some(RunSettings::of(&plan, &model));
         assert!(matches(&record, &plan));
         // A default that changed since the run (the rate, the normalisation, the de-pooling)

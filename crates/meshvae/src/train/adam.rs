@@ -123,12 +123,7 @@ impl Adam {
     /// Clips every step's gradient (the loss's, before the L2 term's is added) to `factor`
     /// times the running mean of the recent gradient norms ([`GradClip`]); 0 turns it off.
     pub fn set_grad_clip(&mut self, factor: f64) -> Result<()> {
-        if !(factor == 0.0 || (factor.is_finite() && factor >= 1.0)) {
-            return Err(VaeError::argument(
-                "grad_clip",
-                format!("{factor} is neither 0 (off) nor a factor ≥ 1"),
-            ));
-        }
+        GradClip::check_factor(factor)?;
         self.clip = GradClip::new(factor);
         Ok(())
     }

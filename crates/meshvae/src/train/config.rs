@@ -165,12 +165,7 @@ impl TrainConfig {
                 format!("{} is not positive", self.head_lr_scale),
             ));
         }
-        if !(self.grad_clip == 0.0 || (self.grad_clip.is_finite() && self.grad_clip >= 1.0)) {
-            return Err(VaeError::argument(
-                "grad_clip",
-                format!("{} is neither 0 (off) nor a factor ≥ 1", self.grad_clip),
-            ));
-        }
+        crate::GradClip::check_factor(self.grad_clip)?;
         if self.batch == 0 {
             return Err(VaeError::argument("batch", "must be at least 1"));
         }

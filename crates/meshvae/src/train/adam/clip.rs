@@ -7,7 +7,7 @@
 //! gradient several times the recent ones (8× in one step on horse-gallop at a rate of 1e-2);
 //! scaled down, it moves Adam's moments by no more than an ordinary step does.
 
-use serde::{Deserialize, Serialize};
+use crate::error::{Result, VaeError};
 
 /// The mean's decay per step (about the last 50 steps).
 const DECAY: f64 = 0.98;
@@ -16,7 +16,7 @@ const WARM_STEPS: u64 = 20;
 
 /// The clipping rule and its running mean (kept in the checkpoint: a resumed run clips as the
 /// uninterrupted one does).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GradClip {
     /// Clip at this many times the running mean (0: never clip).
     pub factor: f64,
@@ -35,6 +35,19 @@ impl GradClip {
             sum: 0.0,
             seen: 0,
             clipped: 0,
+        }
+    }
+
+    /// Checks a factor: 0 (off) or a finite factor ≥ 1 (below 1 every step would be clipped).
+    /// The error names the setting, `grad_clip`.
+    pub fn check_factor(factor: f64) -> Result<()> {
+        if factor == 0.0 || (factor.is_finite() && factor >= 1.0) {
+            Ok(())
+        } else {
+            Err(VaeError::argument(
+                "grad_clip",
+                format!("{factor} is neither 0 (off) nor a factor ≥ 1"),
+            ))
         }
     }
 
