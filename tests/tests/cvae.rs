@@ -168,11 +168,14 @@ fn synthetic_bend_twist_samples_follow_their_label() {
             epochs: SYNTH_EPOCHS,
             batch: 4,
             loss: KL_HEAVY,
-            // The rate, constant schedule and min–max feature ranges the shares were
+            // The optimiser, constant schedule and min–max feature ranges the shares were
             // measured with.
             lr: 1e-3,
             schedule: Schedule::constant(),
             normalize_quantile: 0.0,
+            adam_beta2: 0.999,
+            head_lr_scale: 1.0,
+            grad_clip: 0.0,
             ..TrainConfig::default()
         },
     );
@@ -214,11 +217,14 @@ fn horse_gallop_and_poses_samples_follow_their_label() {
             epochs: HORSE_EPOCHS,
             batch: 4,
             loss: KL_HEAVY,
-            // The rate, constant schedule and min–max feature ranges the shares were
+            // The optimiser, constant schedule and min–max feature ranges the shares were
             // measured with.
             lr: 1e-3,
             schedule: Schedule::constant(),
             normalize_quantile: 0.0,
+            adam_beta2: 0.999,
+            head_lr_scale: 1.0,
+            grad_clip: 0.0,
             ..TrainConfig::default()
         },
     );

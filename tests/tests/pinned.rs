@@ -25,7 +25,9 @@
 use candle_core::{DType, Device};
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
-use meshvae::{ConvKind, ModelConfig, TrainConfig, TrainOptions, TrainRequest, TrainedModel};
+use meshvae::{
+    ConvKind, ModelConfig, Schedule, TrainConfig, TrainOptions, TrainRequest, TrainedModel,
+};
 use std::path::Path;
 
 const EPOCHS: usize = 20;
@@ -97,6 +99,12 @@ fn run(set: &MeshSet, case: &Case, batch: usize, tag: &str) -> String {
             epochs: EPOCHS,
             batch,
             seed: 5,
+            // The settings the figures were pinned with (the defaults of their time), so that
+            // a change of defaults does not move them.
+            schedule: Schedule::plateau(),
+            adam_beta2: 0.999,
+            head_lr_scale: 1.0,
+            grad_clip: 0.0,
             ..TrainConfig::default()
         },
         features: Default::default(),

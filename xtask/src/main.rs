@@ -53,8 +53,8 @@ struct ReproduceArgs {
     #[arg(long)]
     epochs: Option<usize>,
     /// Train every run as `meshvae train` does by default, until the validation loss converges
-    /// (learning rate 1e-2 halved on plateaus, stop after 1,500 steps without a new best), at
-    /// most 20,000 steps [with --quick: 4 steps]; runs and records live under `converged/`.
+    /// (learning rate 1e-2 after a warm-up, a cosine decay, stop 200 steps after the last new
+    /// best once it has ended), at most 20,000 steps [with --quick: 4 steps]; runs and records live under `converged/`.
     /// This is the default; the flag only says so.
     #[arg(long, conflicts_with = "epochs")]
     converged: bool,

@@ -11,26 +11,6 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// The demo's training schedule, as `meshvae train` options: the synthetic set is learnt fast
-/// at a high rate once the dense heads train at a third of it (no loss spikes), and a cosine
-/// decay brings the run to `converged` in about 1,800 steps (see docs/benchmarks.md, "`meshvae
-/// demo`").
-const SCHEDULE: [&str; 14] = [
-    "--lr",
-    "1e-2",
-    "--warmup",
-    "100",
-    "--decay",
-    "1500",
-    "--patience",
-    "200",
-    "--min-improvement",
-    "0.01",
-    "--beta2",
-    "0.99",
-    "--head-lr-scale",
-    "0.3",
-];
 /// Meshes the demo generates.
 const GENERATED: usize = 12;
 /// Meshes of the interpolation, both ends included.
@@ -225,7 +205,6 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
         "--force"
     ]
     .to_vec();
-    train_argv.extend(SCHEDULE.map(OsString::from));
     if let Some(n) = args.epochs {
         train_argv.extend(argv!["--epochs", n.to_string()]);
     }

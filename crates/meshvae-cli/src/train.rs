@@ -28,19 +28,20 @@ pub struct TrainArgs {
     /// measured never reach: they converge first]. With --resume, may be raised.
     #[arg(long)]
     steps: Option<usize>,
-    /// Stop (converged) after this many optimizer steps without a new best validation loss;
-    /// 0 trains the whole budget [default: 1500].
+    /// Stop (converged) after this many optimizer steps without a new best validation loss
+    /// (after the decay, if any); 0 trains the whole budget [default: 200].
     #[arg(long)]
     patience: Option<usize>,
     /// A new best counts (for --patience) only when it lies this fraction below the best that
-    /// last counted [default: 0.001].
+    /// last counted [default: 0.01].
     #[arg(long)]
     min_improvement: Option<f64>,
-    /// Halve the learning rate after this many steps without a new best (at most five times);
-    /// 0 keeps it constant [default: 400].
+    /// Without a decay (--decay 0): halve the learning rate after this many steps without a
+    /// new best (at most five times); 0 keeps it constant [default: 0; 400 was the default
+    /// before the cosine decay].
     #[arg(long)]
     lr_patience: Option<usize>,
-    /// Raise the learning rate linearly from a tenth over this many first steps [default: 0].
+    /// Raise the learning rate linearly from a tenth over this many first steps [default: 300].
     #[arg(long)]
     warmup: Option<usize>,
     /// Cut the rate and stop on a moving average of the validation loss over about this many
@@ -49,7 +50,8 @@ pub struct TrainArgs {
     smoothing: Option<usize>,
     /// Let the rate fall along a half cosine to 1/32 of --lr over this many steps after the
     /// warm-up (no plateau cuts; the run stops once the decay has ended and --patience steps
-    /// pass without a new best); 0 cuts the rate on plateaus [default: 0].
+    /// pass without a new best); 0 cuts the rate on plateaus (see --lr-patience) [default:
+    /// 1200].
     #[arg(long)]
     decay: Option<usize>,
     /// Scale a step's gradient down to K times the running mean of the recent gradient norms
@@ -57,14 +59,14 @@ pub struct TrainArgs {
     #[arg(long, value_name = "K")]
     clip: Option<f64>,
     /// Measure the validation loss only once this many steps have passed since the last
-    /// time (and at the end); 0 or 1 measures it after every epoch [default: 0].
+    /// time (and at the end); 0 or 1 measures it after every epoch [default: 10].
     #[arg(long)]
     validate_every: Option<usize>,
-    /// Adam's β₂ [default: 0.999, TF's and the authors'].
+    /// Adam's β₂ [default: 0.95; TF's and the authors' is 0.999].
     #[arg(long)]
     beta2: Option<f64>,
     /// The dense heads' weights (W_μ, W_σ, tens of thousands of inputs per latent unit) train
-    /// at this fraction of the rate [default: 1, one rate for all, as the authors].
+    /// at this fraction of the rate [default: 0.3; the authors train all at one rate].
     #[arg(long)]
     head_lr_scale: Option<f64>,
     /// Seeds the split, the initial weights, the shuffles and the sampling [default: 1].

@@ -23,8 +23,8 @@
 //! 9 channels, latent 128, batch norm, σ = sqrt(2·sigmoid), decoder FC tied to the μ head, loss
 //! weights 40 / 3 / 1, Adam, batch 50); where that code departs from the paper's text,
 //! [`ModelConfig`] offers both readings. Training departs from theirs (1e-3 for a fixed 8,000
-//! epochs): the rate starts at 1e-2, is halved on plateaus of the validation loss, and the run
-//! stops when that loss has stopped improving.
+//! epochs): the rate warms up to 1e-2 and falls along a cosine, Adam's β₂ is 0.95, and the run
+//! stops when the validation loss has stopped improving.
 //!
 //! ```
 //! use meshvae::{ModelConfig, TrainConfig, TrainOptions, TrainRequest, TrainedModel, train};
@@ -88,8 +88,8 @@ pub use cpu::{Engine, StepLoss};
 pub use train::adam::{Adam, AdamConfig, GradClip};
 pub use train::checkpoint::{Checkpoint, Progress};
 pub use train::config::{
-    DEFAULT_BETA2, DEFAULT_HEAD_LR_SCALE, DEFAULT_MAX_STEPS, DEFAULT_NORMALIZE_QUANTILE,
-    TrainConfig,
+    DEFAULT_BETA2, DEFAULT_GRAD_CLIP, DEFAULT_HEAD_LR_SCALE, DEFAULT_MAX_STEPS,
+    DEFAULT_NORMALIZE_QUANTILE, TrainConfig,
 };
 pub use train::data::{MeshData, NormalizationFit, denormalize};
 pub use train::folder::{ModelFolder, ModelSpec, SplitFile};

@@ -128,6 +128,68 @@ fn a_run_killed_after_its_best_epoch_replays_the_later_epochs_to_the_same_end() 
     }
 }
 
+/// The default training looks at the validation loss only every few steps, and `--clip` keeps
+/// a running mean of the gradient norms: a run killed between two looks resumes from its
+/// checkpoint (written only after a look) and ends bit for bit as the run that was never
+/// stopped, the clip's running mean included.
+#[test]
+fn a_killed_run_resumes_between_looks() {
+    let set = small_set(3, 8);
+    let epochs = 14;
+    let req = |out: &Path| {
+        let mut r = request(&set, out, epochs);
+        r.train.schedule.validate_every_steps = 4;
+        r.train.schedule.warmup_steps = 4;
+        r.train.schedule.decay_steps = 20;
+        r.train.grad_clip = 1.0;
+        r
+    };
+    let opts = |resume: bool| TrainOptions {
+        checkpoint_seconds: 0.0,
+        test_every_steps: 1,
+        ..options(resume, false)
+    };
+    let whole = scratch("looks-whole");
+    train(&req(&whole), &opts(false), |_| {}).unwrap();
+    let log = read_log(&ModelFolder::new(&whole).log()).unwrap();
+    let looked: Vec<bool> = log.iter().map(|r| r.val_loss.is_some()).collect();
+    assert!(
+        looked.contains(&false) && looked.iter().filter(|&&l| l).count() >= 3,
+        "{looked:?}"
+    );
+    // Killed (a panic out of the epoch callback) after an epoch that was not looked at.
+    let kill_after = 1 + looked[1..epochs - 1].iter().rposition(|&l| !l).unwrap();
+    let parts = scratch("looks-parts");
+    let killed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        train(&req(&parts), &opts(false), |r| {
+            assert!(r.epoch != kill_after, "killed");
+        })
+    }));
+    assert!(killed.is_err());
+    let resumed = train(&req(&parts), &opts(true), |_| {}).unwrap();
+    assert!(resumed.epochs_run > 0 && resumed.epochs_run < epochs);
+    let (fw, fp) = (ModelFolder::new(&whole), ModelFolder::new(&parts));
+    let read = |p: PathBuf| std::fs::read(p).unwrap();
+    assert!(read(fw.weights()) == read(fp.weights()), "weights differ");
+    let (la, lb) = (read_log(&fw.log()).unwrap(), read_log(&fp.log()).unwrap());
+    let losses = |l: &[EpochRecord]| {
+        l.iter()
+            .map(|r| (r.epoch, r.train_loss, r.val_loss))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(losses(&la), losses(&lb), "logs differ");
+    let (sa, sb) = (
+        read_status(&fw).unwrap().unwrap(),
+        read_status(&fp).unwrap().unwrap(),
+    );
+    assert_eq!(
+        (sa.epochs, sa.steps, sa.best_epoch, sa.stop_reason),
+        (sb.epochs, sb.steps, sb.best_epoch, sb.stop_reason)
+    );
+    let _ = std::fs::remove_dir_all(&whole);
+    let _ = std::fs::remove_dir_all(&parts);
+}
+
 #[test]
 fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weights() {
     let set = small_set(3, 8);
@@ -227,6 +289,15 @@ fn resumption_is_exact(best_in_memory_params: &usize, tag: &str) {
     let set = small_set(3, 8);
     let whole = scratch(&format!("whole-{tag}"));
     let parts = scratch(&format!("parts-{tag}"));
+    // Validation after every epoch: the "interrupted" run below is a run whose budget ended,
+    // and a run always looks at its last epoch, so with a look every N steps it would look at
+    // one epoch more than the uninterrupted run. (A killed run resumes from its last
+    // checkpoint, written only after a look: `a_killed_run_resumes_between_looks`.)
+    let request = |set, out, epochs| {
+        let mut r = request(set, out, epochs);
+        r.train.schedule.validate_every_steps = 0;
+        r
+    };
 
     let summary = train(&request(&set, &whole, 4), &options(false, false), |_| {}).unwrap();
     assert_eq!(summary.epochs_run, 4);

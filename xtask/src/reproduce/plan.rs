@@ -341,6 +341,7 @@ impl Run {
                 normalize_quantile: 0.0,
                 adam_beta2: meshvae::AdamConfig::default().beta2,
                 head_lr_scale: 1.0,
+                grad_clip: 0.0,
                 ..TrainConfig::default()
             },
             Budget::Converged { max_steps } => TrainConfig {

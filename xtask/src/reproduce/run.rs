@@ -427,6 +427,8 @@ mod tests {
         converged.step_budget = Some(DEFAULT_MAX_STEPS);
         converged.stop_reason = Some("converged".into());
         converged.steps = Some(5400);
+        let plan = run(Budget::CONVERGED);
+        converged.settings = Some(RunSettings::of(&plan, &plan.column.model().unwrap()));
         // Even a converged run that took exactly 600 epochs is not a run of the 600-epoch plan.
         for epochs in [600, 1234] {
             converged.epochs = epochs;
@@ -452,12 +454,20 @@ mod tests {
         let plan = run(Budget::CONVERGED);
         record.step_budget = Some(DEFAULT_MAX_STEPS);
         let model = plan.column.model().unwrap();
-        // Records written before they kept their settings match on the rest while the
-        // defaults are those of that time, and not once they change.
-        assert!(record.settings.is_none() && matches(&record, &plan));
-        let today = RunSettings::of(&plan, &model);
+        // Records written before they kept their settings trained with the defaults of that
+        // time (the plateau schedule, TF's β₂, one rate, no clipping), not today's: they are
+        // trained again rather than reused.
+        assert!(record.settings.is_none() && !matches(&record, &plan));
+        let mut then = RunSettings::of(&plan, &model);
+        then.train.lr = 1e-2;
+        then.train.schedule = meshvae::Schedule::plateau();
+        then.train.adam_beta2 = 0.999;
+        then.train.head_lr_scale = 1.0;
+        then.train.grad_clip = 0.0;
+        assert!(record.matches_settings(&plan, &model, &then));
+        // Under those defaults, a change to any one of them would not reuse it either.
         let changed = |edit: &dyn Fn(&mut RunSettings)| {
-            let mut current = today.clone();
+            let mut current = then.clone();
             edit(&mut current);
             !record.matches_settings(&plan, &model, &current)
         };

@@ -4,9 +4,9 @@
 //! Each epoch shuffles the training meshes, takes Adam steps on batches, measures the
 //! validation and test losses (the authors' validation loss: w_rec · mean squared error with
 //! z = μ and batch norm in inference mode, here a true mean over the meshes) and appends a line
-//! to `log.jsonl`. The validation loss also drives the [`Schedule`]: the learning rate is cut
-//! on plateaus and the run stops, *converged*, once the loss has not reached a new best for the
-//! schedule's patience; otherwise it ends with its budget ([`TrainConfig::steps`](crate::TrainConfig::steps) or
+//! to `log.jsonl`. The validation loss also drives the [`Schedule`]: the run stops, *converged*,
+//! once the loss has not reached a new best for the schedule's patience after its decay (or,
+//! without a decay, the rate is cut on plateaus); otherwise it ends with its budget ([`TrainConfig::steps`](crate::TrainConfig::steps) or
 //! `epochs`). `run.json` says which ([`RunStatus`]; `interrupted` until the run ends). Every [`TrainOptions::checkpoint_seconds`] (and after the last epoch) it
 //! writes the weights with the lowest validation loss so far (the training loss without
 //! validation meshes) to `weights.safetensors`, and the whole state to

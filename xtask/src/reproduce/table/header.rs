@@ -131,9 +131,9 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     );
 }
 
-/// "learning rate 1e-2 halved on plateaus, stop after 1,500 steps without a new best; budget
-/// 20,000 steps" (or, with a decay, "… after a 100-step warm-up, falling along a cosine to 1/32
-/// of it over 1,500 steps, stop after 300 steps without a new best once it has …"):
+/// "learning rate 1e-2 after a 300-step warm-up, falling along a cosine to 1/32 of it over
+/// 1,200 steps, stop after 200 steps without a new best once it has ended, …; budget 20,000
+/// steps" (or, without a decay, "… halved on plateaus, stop after 1,500 steps …"):
 /// `meshvae train`'s default training, from its settings.
 pub(super) fn converged_training(max_steps: usize) -> String {
     let train = TrainConfig::default();
@@ -145,7 +145,7 @@ pub(super) fn converged_training(max_steps: usize) -> String {
     let rule = if schedule.decay_steps > 0 {
         format!(
             "{warmup}, falling along a cosine to 1/{} of it over {} steps, stop after {} steps \
-             without a new best once it has",
+             without a new best once it has ended",
             (1.0 / schedule.min_lr_ratio).round(),
             thousands(schedule.decay_steps),
             thousands(schedule.patience),
@@ -172,8 +172,16 @@ pub(super) fn converged_training(max_steps: usize) -> String {
     } else {
         format!("; Adam's β₂ {}", train.adam_beta2)
     };
+    let clip = if train.grad_clip == 0.0 {
+        String::new()
+    } else {
+        format!(
+            "; a step's gradient clipped to {}× the recent norm",
+            train.grad_clip
+        )
+    };
     format!(
-        "learning rate {:e}{rule}{heads}{beta2}; budget {} steps",
+        "learning rate {:e}{rule}{heads}{beta2}{clip}; budget {} steps",
         train.lr,
         thousands(max_steps)
     )

@@ -299,9 +299,10 @@ fn the_header_describes_the_plan_and_how_converged_runs_stopped() {
     );
     assert!(
         md.contains(
-            "- Every run trained until the validation loss converged (learning rate 1e-2 \
-             halved on plateaus, stop after 1,500 steps without a new best; budget 20,000 \
-             steps), as `meshvae train` does by default"
+            "- Every run trained until the validation loss converged (learning rate 1e-2 after \
+             a 300-step warm-up, falling along a cosine to 1/32 of it over 1,200 steps, stop \
+             after 200 steps without a new best once it has ended, the dense heads' at 0.3 of \
+             it; Adam's β₂ 0.95; budget 20,000 steps), as `meshvae train` does by default"
         ),
         "{md}"
     );
