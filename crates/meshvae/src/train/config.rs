@@ -117,9 +117,10 @@ impl Default for TrainConfig {
 
 /// The default [`TrainConfig::adam_beta2`]. TF's 0.999 (the authors') averages squared
 /// gradients over about 1,000 steps, so the average lags behind a gradient whose size changes
-/// within a run's warm-up and decay. With 0.95 (about 20 steps) no horse-gallop seed and no
-/// synthetic run spiked at a peak rate of 1e-2, where 0.99 spiked on two seeds of three; samba
-/// showed one 3.1× spike in three seeds (docs/benchmarks.md, "Training schedule").
+/// within a run's warm-up and decay. With 0.95 (about 20 steps) none of horse-gallop's seeds
+/// 1–3 and neither synthetic run (the demo, the spike test) spiked at a peak rate of 1e-2,
+/// where 0.99 spiked on one seed of each schedule tried; samba showed one 3.1× spike in three
+/// seeds (docs/benchmarks.md, "Training schedule").
 pub const DEFAULT_BETA2: f64 = 0.95;
 
 /// The default [`TrainConfig::head_lr_scale`]. Adam moves every weight by about the rate, so
