@@ -5,6 +5,8 @@
 //! - `cargo xtask reproduce [--dataset …] [--epochs N] [--split-by-mesh] [--seeds N] [--quick]`:
 //!   trains the paper's ablations on our data sets, each run until converged (or for N epochs),
 //!   and writes `docs/results.md` or the page of its plan (see `xtask::reproduce`).
+//! - `cargo xtask reproduce --check RECORD`: trains one recorded run again and sets its numbers
+//!   beside the stored ones.
 
 use clap::{Parser, Subcommand};
 use mesh_io::{QualityReport, datasets};
@@ -101,6 +103,12 @@ struct ReproduceArgs {
     /// reproduction spans several sessions).
     #[arg(long)]
     report_only: bool,
+    /// Train the run of one result record (`…/seed<N>/<column>.result.json`) again, from
+    /// scratch, with the settings it names, and print its numbers beside the stored ones; exits
+    /// non-zero, saying why, unless every number agrees to the digit. Trains under
+    /// `<work>/check`.
+    #[arg(long, value_name = "RECORD", conflicts_with = "report_only")]
+    check: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -159,6 +167,10 @@ fn default_results(budget: Budget, by_shape: bool, protocol: &plan::Protocol) ->
 }
 
 fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
+    let commit = reproduce::commit::Commit::of(workspace());
+    if let Some(record) = &args.check {
+        return run_check(record, &args, commit.as_ref());
+    }
     let mut notes = Vec::new();
     let names: Vec<String> = if !args.dataset.is_empty() {
         args.dataset.clone()
@@ -243,6 +255,7 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
             .join(" "),
         progress: !args.quiet,
         report_only: args.report_only,
+        commit,
     };
     let outcome = reproduce::reproduce(options, notes)?;
     println!(
@@ -253,6 +266,29 @@ fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
         outcome.options.results.display()
     );
     Ok(())
+}
+
+/// `--check RECORD`: the comparison on stdout; an error when a number differs.
+fn run_check(
+    record: &Path,
+    args: &ReproduceArgs,
+    commit: Option<&reproduce::commit::Commit>,
+) -> Result<(), reproduce::ReproError> {
+    let work = args
+        .work
+        .clone()
+        .unwrap_or_else(|| workspace().join("target/reproduce"))
+        .join("check");
+    let checked = reproduce::check::check(record, &work, commit)?;
+    print!("{}", checked.report());
+    if checked.agrees() {
+        Ok(())
+    } else {
+        Err(reproduce::ReproError::Results {
+            path: record.to_path_buf(),
+            message: "its numbers were not reproduced (see above)".into(),
+        })
+    }
 }
 
 fn check_datasets(pack: Option<PathBuf>) -> ExitCode {

@@ -300,6 +300,99 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         std::fs::read_to_string(seed_dir.join("ours/log.jsonl")).unwrap(),
         log
     );
+    // Every record names the code that made it, as the page does.
+    let commit = xtask::reproduce::commit::Commit::of(Path::new(env!("CARGO_MANIFEST_DIR")));
+    assert_eq!(ours.commit, commit);
+    if let Some(commit) = &commit {
+        assert!(
+            md.contains(&format!("- Code: `{commit}` ({runs} runs).")),
+            "{md}"
+        );
+    }
+
+    // A record made with another setting (here the rate, as when a default changes) is
+    // flagged by --report-only and trained again, from scratch, by the next invocation.
+    let record_path = seed_dir.join("ours.result.json");
+    let edit_lr = |path: &Path, pointer: &str| {
+        let mut value: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        *value.pointer_mut(pointer).unwrap() = serde_json::json!(0.005);
+        std::fs::write(path, serde_json::to_string_pretty(&value).unwrap()).unwrap();
+    };
+    edit_lr(&record_path, "/settings/train/lr");
+    edit_lr(&seed_dir.join("ours/config.json"), "/train/lr");
+    let report = reproduce_with(
+        &work,
+        &dir.join("stale.md"),
+        &["--dataset", "synthetic", "--report-only"],
+    );
+    let stdout = String::from_utf8_lossy(&report.stdout);
+    assert!(
+        stdout.contains(&format!("{} runs ({} reused)", runs - 1, runs - 1)),
+        "{stdout}"
+    );
+    let md = std::fs::read_to_string(dir.join("stale.md")).unwrap();
+    assert!(
+        md.contains("**Stale:** 1 of the records were made with other settings")
+            && md.contains("synthetic seed 1 ours: train.lr 0.005 → 0.01"),
+        "{md}"
+    );
+    let retrained = reproduce_with(&work, &dir.join("converged.md"), &converged);
+    let stdout = String::from_utf8_lossy(&retrained.stdout);
+    assert!(
+        stdout.contains(&format!("{runs} runs ({} reused)", runs - 1)),
+        "{stdout}"
+    );
+    let again = result_in(&work, "synthetic", "converged-s4", "ours");
+    assert_eq!(again.settings, ours.settings);
+    assert_eq!((again.test_rms, again.steps), (ours.test_rms, ours.steps));
+    // Trained again (not resumed, not only evaluated): the same epochs, in their own time.
+    let untimed = |log: &str| -> Vec<serde_json::Value> {
+        log.lines()
+            .map(|line| {
+                let mut v: serde_json::Value = serde_json::from_str(line).unwrap();
+                v["seconds"] = serde_json::Value::Null;
+                v
+            })
+            .collect()
+    };
+    let relog = std::fs::read_to_string(seed_dir.join("ours/log.jsonl")).unwrap();
+    assert_eq!(untimed(&relog), untimed(&log));
+    assert_ne!(relog, log, "the log was not written again");
+
+    // --check trains the record's run again and agrees to the digit; a record whose number
+    // was changed does not, and the command says which number and fails.
+    let record = record_path.to_str().unwrap();
+    let checked = reproduce_with(&work, &dir.join("unused.md"), &["--check", record]);
+    let stdout = String::from_utf8_lossy(&checked.stdout);
+    assert!(
+        stdout.contains("reproduced: all 18 numbers agree to the digit."),
+        "{stdout}"
+    );
+    assert!(
+        work.join("check/synthetic/validation/converged-s4/seed1/ours")
+            .is_dir()
+    );
+    let tampered = dir.join("tampered.result.json");
+    let mut value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&record_path).unwrap()).unwrap();
+    value["test_rms"] = serde_json::json!(ours.test_rms * 1.5);
+    std::fs::write(&tampered, value.to_string()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["reproduce", "--quiet", "--work"])
+        .arg(&work)
+        .arg("--check")
+        .arg(&tampered)
+        .output()
+        .expect("the xtask binary runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("← differs") && stdout.contains("not reproduced: 1 of 18 numbers differ"),
+        "{stdout}"
+    );
+    assert!(stderr.contains("tampered.result.json"), "{stderr}");
 }
 
 #[test]

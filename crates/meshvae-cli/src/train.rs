@@ -55,7 +55,7 @@ pub struct TrainArgs {
     #[arg(long)]
     decay: Option<usize>,
     /// Scale a step's gradient down to K times the running mean of the recent gradient norms
-    /// when it is larger (a blow-up's first step); 0 never clips [default: 0].
+    /// when it is larger (a blow-up's first step); 0 never clips [default: 3].
     #[arg(long, value_name = "K")]
     clip: Option<f64>,
     /// Measure the validation loss only once this many steps have passed since the last

@@ -59,6 +59,14 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     fails_with(&resume(&["--steps", "0"]), 1, "steps");
     fails_with(&resume(&["--epochs", "4", "--steps", "9"]), 2, "--steps");
     fails_with(&resume(&["--lr", "0.5"]), 1, "cannot resume");
+    // The optimiser's settings too: a resumed run trains as it began or not at all.
+    for flag in [
+        ["--clip", "2"],
+        ["--beta2", "0.999"],
+        ["--head-lr-scale", "1"],
+    ] {
+        fails_with(&resume(&flag), 1, "cannot resume");
+    }
     // The split is drawn by shape unless asked otherwise, and a model keeps its kind of split.
     let split = |dir: &std::path::Path| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(dir.join("split.json")).unwrap()).unwrap()

@@ -4,6 +4,8 @@
 //!
 //! - [`plan`]: the run table (data sets, columns, protocols) and each run's folder;
 //! - [`run`]: one run — train with resumption, evaluate, record a result JSON;
+//! - [`settings`], [`commit`]: what a record says made it, and what differs from today's;
+//! - [`check`]: `--check RECORD`, one record retrained and compared digit by digit;
 //! - [`stats`]: mean ± std over seeds;
 //! - [`table`]: the markdown;
 //! - [`params`]: parameter counts (ours by the paper's formula, Tan et al.'s derived);
@@ -13,21 +15,26 @@
 //! `<data set>/<protocol>/<budget>/seed<N>/<column>` with the budget `converged` (the default:
 //! until the validation loss converges, `-by-mesh` for the paper's split) or `e<epochs>`
 //! (`--epochs N`: a fixed number of epochs at the authors' constant rate); a finished
-//! run leaves `<column>.result.json` beside it and is skipped next time, an unfinished one is
-//! resumed from its checkpoint, so an interrupted `reproduce` continues where it stopped.
+//! run leaves `<column>.result.json` beside it (with the commit and settings that made it) and
+//! is skipped next time while today's code would train it with the same settings, an unfinished
+//! one is resumed from its checkpoint, so an interrupted `reproduce` continues where it stopped.
 
+pub mod check;
+pub mod commit;
 pub mod paper;
 pub mod params;
 pub mod plan;
 pub mod run;
+pub mod settings;
 pub mod stats;
 pub mod table;
 
+use commit::Commit;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mesh_io::MeshSet;
 use mesh_io::synth::SynthConfig;
 use plan::{Budget, Column, Dataset, Protocol, Run, Source};
-use run::RunResult;
+use run::{Recorded, RunResult};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -100,6 +107,8 @@ pub struct Options {
     /// Train nothing: write the markdown from the runs already finished (a full reproduction
     /// spans several sessions; this shows where it stands).
     pub report_only: bool,
+    /// The code this invocation runs, written into every record it makes.
+    pub commit: Option<Commit>,
 }
 
 impl Options {
@@ -288,15 +297,22 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     let mut results = Vec::new();
     let mut reused = 0;
     let mut unfinished = 0;
+    let mut stale = Vec::new();
     for &dataset in &options.datasets {
         let loaded = load(dataset, options.quick)?;
         let mut pending = Vec::new();
         for run in runs.iter().filter(|r| r.dataset.name == dataset.name) {
-            if let Some(done) = run::finished(run, options.records())? {
+            let record = run::recorded(run, options.records())?;
+            if let Recorded::Current(done) = record {
                 reused += 1;
-                results.push(done);
+                results.push(*done);
                 runs_bar.inc(1);
-            } else if options.report_only {
+                continue;
+            }
+            if let Recorded::Stale { differences, .. } = record {
+                stale.push((run.name(), differences));
+            }
+            if options.report_only {
                 unfinished += 1;
                 runs_bar.inc(1);
             } else {
@@ -321,6 +337,9 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
             runs.len()
         ));
     }
+    if !stale.is_empty() {
+        notes.push(stale_note(&stale, options.report_only));
+    }
     if reused > 0 {
         notes.push(format!(
             "{reused} of {} runs were finished by an earlier invocation and read from their \
@@ -339,6 +358,43 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     };
     write_results(&outcome)?;
     Ok(outcome)
+}
+
+/// The page's note on records made with other settings than today's: how many, and what
+/// changed, grouped by the same differences.
+fn stale_note(stale: &[(String, Vec<String>)], report_only: bool) -> String {
+    let mut groups: Vec<(&[String], Vec<&str>)> = Vec::new();
+    for (name, differences) in stale {
+        match groups
+            .iter_mut()
+            .find(|(d, _)| *d == differences.as_slice())
+        {
+            Some((_, names)) => names.push(name),
+            None => groups.push((differences, vec![name])),
+        }
+    }
+    let described: Vec<String> = groups
+        .iter()
+        .map(|(differences, names)| {
+            let runs = match names.as_slice() {
+                [one] => one.to_string(),
+                [first, ..] => format!("{} runs ({first}, …)", names.len()),
+                [] => String::new(),
+            };
+            format!("{runs}: {}", differences.join(", "))
+        })
+        .collect();
+    format!(
+        "**Stale:** {} of the records were made with other settings than today's code runs; \
+         they are {}. {}.",
+        stale.len(),
+        if report_only {
+            "not shown (the same command without `--report-only` trains them again)"
+        } else {
+            "not reused: this invocation trained them again"
+        },
+        described.join("; ")
+    )
 }
 
 /// Trains one data set's unfinished runs, `options.jobs` at a time.
@@ -425,13 +481,19 @@ impl Trainer<'_> {
         bar.set_message(name.clone());
         let patience = run.train_config().schedule.patience;
         let checkpoint_seconds = if self.options.quick { 1e9 } else { 60.0 };
+        let model = run.column.model().map_err(|e| ReproError::run(run, e))?;
+        let place = run::Place {
+            work: &self.options.work,
+            records: self.options.records(),
+            checkpoint_seconds,
+            commit: self.options.commit.as_ref(),
+        };
         let result = run::execute(
             run,
+            &run::RunSettings::of(run, &model),
             &self.loaded.set,
             self.loaded.source.clone(),
-            &self.options.work,
-            self.options.records(),
-            checkpoint_seconds,
+            place,
             |record| {
                 if let Some(max_steps) = run.budget.max_steps()
                     && record.epoch > 0

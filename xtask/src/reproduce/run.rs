@@ -1,15 +1,15 @@
 //! One run: train (resuming a model folder left by an interrupted run), evaluate, and record the
-//! numbers in a small JSON beside the model folder. A run whose JSON exists is not repeated.
+//! numbers in a small JSON beside the model folder. A run whose JSON holds today's settings is
+//! not repeated; one made with other settings is trained again.
 
 use super::ReproError;
+use super::commit::Commit;
 use super::plan::{Budget, Run};
+pub use super::settings::{RunSettings, setting_differences};
 use candle_core::Device;
-use deform_features::FeatureOptions;
-use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use meshvae::{
-    EpochRecord, ModelConfig, ModelFolder, StopReason, TrainConfig, TrainOptions, TrainRequest,
-    TrainedModel,
+    EpochRecord, ModelConfig, ModelFolder, StopReason, TrainOptions, TrainRequest, TrainedModel,
 };
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -97,34 +97,10 @@ pub struct RunResult {
     /// Absent from results written before records kept them; those match on the rest.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settings: Option<RunSettings>,
-}
-
-/// The settings of [`RunResult::settings`], as `config.json` of the model folder holds them.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunSettings {
-    pub train: TrainConfig,
-    pub features: FeatureOptions,
-    pub hierarchy: HierarchyConfig,
-}
-
-impl RunSettings {
-    /// What `run` trains with today.
-    pub fn of(run: &Run, model: &ModelConfig) -> Self {
-        Self {
-            train: run.train_config(),
-            features: FeatureOptions::default(),
-            hierarchy: meshvae::hierarchy_config(model, HierarchyConfig::default()),
-        }
-    }
-
-    /// What a record of `run` without settings is taken to have trained with
-    /// ([`Run::unrecorded_train_config`]).
-    pub fn unrecorded(run: &Run, model: &ModelConfig) -> Self {
-        Self {
-            train: run.unrecorded_train_config(),
-            ..Self::of(run, model)
-        }
-    }
+    /// The code that wrote this record (`cargo xtask reproduce --check` retrains it and says
+    /// whether the numbers still agree). Absent from records written before they kept it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commit: Option<Commit>,
 }
 
 /// [`meshvae::CopySplit`] as a run records it.
@@ -154,18 +130,42 @@ impl RunResult {
 
     /// [`Self::matches`] against the settings `current` rather than today's.
     pub fn matches_settings(&self, run: &Run, model: &ModelConfig, current: &RunSettings) -> bool {
+        self.differences(run, model, current).is_empty()
+    }
+
+    /// What differs between this record and `run` trained with `current`, one phrase each
+    /// (`train.lr 0.001 → 0.01`); empty where the record is that run's.
+    pub fn differences(
+        &self,
+        run: &Run,
+        model: &ModelConfig,
+        current: &RunSettings,
+    ) -> Vec<String> {
+        let mut differences = Vec::new();
+        let mut field = |name: &str, recorded: String, now: String| {
+            if recorded != now {
+                differences.push(format!("{name} {recorded} → {now}"));
+            }
+        };
+        field("data set", self.dataset.clone(), run.dataset.name.into());
+        field("protocol", self.protocol.clone(), run.protocol.id.into());
+        field("column", self.column.clone(), run.column.id.into());
+        field("seed", self.seed.to_string(), run.seed.to_string());
+        field("budget", self.budget().dir_name(), run.budget.dir_name());
+        field(
+            "split by shape",
+            self.split_by_shape.to_string(),
+            run.by_shape.to_string(),
+        );
+        if &self.model != model {
+            differences.push("network (the column's definition changed)".into());
+        }
         let recorded = match &self.settings {
             Some(s) => s.clone(),
             None => RunSettings::unrecorded(run, model),
         };
-        recorded == *current
-            && self.dataset == run.dataset.name
-            && self.protocol == run.protocol.id
-            && self.column == run.column.id
-            && self.seed == run.seed
-            && self.budget() == run.budget
-            && self.split_by_shape == run.by_shape
-            && &self.model == model
+        differences.extend(setting_differences(&recorded, current));
+        differences
     }
 
     /// Whether the run stopped because its validation loss converged.
@@ -187,54 +187,99 @@ impl RunResult {
     }
 }
 
-/// Reads a finished run's result from `records`, if there is one for this very run.
-pub fn finished(run: &Run, records: &Path) -> Result<Option<RunResult>, ReproError> {
-    let path = run.result_path(records);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| ReproError::io(&path, e))?;
-    let result: RunResult = serde_json::from_str(&text).map_err(|e| ReproError::Results {
-        path: path.clone(),
-        message: format!("unreadable run result ({e}); delete it to run again"),
-    })?;
-    let model = run.column.model().map_err(|e| ReproError::run(run, e))?;
-    Ok(result.matches(run, &model).then_some(result))
+/// What `records` holds for one run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Recorded {
+    /// No record: the run has not finished.
+    Missing,
+    /// A record of this very run, with today's settings: reused.
+    Current(Box<RunResult>),
+    /// A record of the run made with other settings (or another network): trained again,
+    /// never reused. `differences` says what changed ([`RunResult::differences`]).
+    Stale {
+        record: Box<RunResult>,
+        differences: Vec<String>,
+    },
 }
 
-/// Trains and evaluates `run` on `set`, resuming its model folder if one exists, and writes its
-/// result under `records` (the same layout as `work`). `on_epoch` sees each epoch as it ends.
+/// Reads `run`'s record from `records`, and whether it is today's.
+pub fn recorded(run: &Run, records: &Path) -> Result<Recorded, ReproError> {
+    let path = run.result_path(records);
+    if !path.is_file() {
+        return Ok(Recorded::Missing);
+    }
+    let record = read_record(&path)?;
+    let model = run.column.model().map_err(|e| ReproError::run(run, e))?;
+    let differences = record.differences(run, &model, &RunSettings::of(run, &model));
+    Ok(if differences.is_empty() {
+        Recorded::Current(Box::new(record))
+    } else {
+        Recorded::Stale {
+            record: Box::new(record),
+            differences,
+        }
+    })
+}
+
+/// Reads a run's record.
+pub fn read_record(path: &Path) -> Result<RunResult, ReproError> {
+    let text = std::fs::read_to_string(path).map_err(|e| ReproError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| ReproError::Results {
+        path: path.to_path_buf(),
+        message: format!("unreadable run result ({e}); delete it to run again"),
+    })
+}
+
+/// Where [`execute`] trains and records, and with which code.
+#[derive(Debug, Clone, Copy)]
+pub struct Place<'a> {
+    /// Folder of the model folders.
+    pub work: &'a Path,
+    /// Folder of the result JSONs (laid out as `work`).
+    pub records: &'a Path,
+    /// Seconds between checkpoints.
+    pub checkpoint_seconds: f64,
+    /// The code, written into the record.
+    pub commit: Option<&'a Commit>,
+}
+
+/// Trains `run` with `settings` on `set` and evaluates it, resuming its model folder if it
+/// holds an interrupted run with the same settings (a folder trained with others is replaced),
+/// and writes its result under `place.records` (the same layout as `place.work`). `on_epoch`
+/// sees each epoch as it ends.
 pub fn execute(
     run: &Run,
+    settings: &RunSettings,
     set: &MeshSet,
     source: Option<PathBuf>,
-    work: &Path,
-    records: &Path,
-    checkpoint_seconds: f64,
+    place: Place<'_>,
     mut on_epoch: impl FnMut(&EpochRecord),
 ) -> Result<RunResult, ReproError> {
     let started = Instant::now();
-    let out = run.model_dir(work);
+    let out = run.model_dir(place.work);
     let model = run.column.model().map_err(|e| ReproError::run(run, e))?;
     let folder = ModelFolder::new(&out);
-    // A folder with a config is a model (perhaps interrupted): continue it. Anything else there
-    // is an interrupted set-up and is replaced.
-    let resume = folder.config().is_file();
+    // A folder with a config is a model (perhaps interrupted): continue it if it trained with
+    // these settings. Anything else there is an interrupted set-up or an older run, replaced.
+    let resume = folder.config().is_file()
+        && folder
+            .read_spec()
+            .is_ok_and(|spec| RunSettings::of_spec(&spec).resumable_with(settings));
     let request = TrainRequest {
         set,
         source,
         out: out.clone(),
         model: model.clone(),
-        train: run.train_config(),
-        features: Default::default(),
-        hierarchy: Default::default(),
+        train: settings.train.clone(),
+        features: settings.features,
+        hierarchy: settings.hierarchy,
         split: None,
     };
     let options = TrainOptions {
         resume,
         force: !resume,
         progress: false,
-        checkpoint_seconds,
+        checkpoint_seconds: place.checkpoint_seconds,
         // The results page reports the authors' choice beside ours.
         keep_selected_on_test: true,
         ..TrainOptions::default()
@@ -325,8 +370,9 @@ pub fn execute(
             features: trained.spec.features,
             hierarchy: trained.spec.hierarchy,
         }),
+        commit: place.commit.cloned(),
     };
-    let path = run.result_path(records);
+    let path = run.result_path(place.records);
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| ReproError::io(parent, e))?;
     }

@@ -177,6 +177,7 @@ pub(super) fn resume_setup(
         a.schedule,
         a.normalize_on_all,
         a.normalize_quantile,
+        (a.adam_beta2, a.head_lr_scale, a.grad_clip),
     ) != (
         b.batch,
         b.lr,
@@ -188,6 +189,7 @@ pub(super) fn resume_setup(
         b.schedule,
         b.normalize_on_all,
         b.normalize_quantile,
+        (b.adam_beta2, b.head_lr_scale, b.grad_clip),
     ) {
         differences.push("training settings other than the budget");
     }

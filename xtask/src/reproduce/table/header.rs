@@ -104,6 +104,7 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
             list.join(", ")
         );
     }
+    code(md, o);
     if let Some(records) = &opts.records {
         let _ = writeln!(
             md,
@@ -185,6 +186,44 @@ pub(super) fn converged_training(max_steps: usize) -> String {
         train.lr,
         thousands(max_steps)
     )
+}
+
+/// "- Code: the records name commit `…` (12 runs) …": which code made the numbers, from the
+/// records themselves (an invocation may reuse records made by earlier commits).
+fn code(md: &mut String, o: &Outcome) {
+    if o.results.is_empty() {
+        return;
+    }
+    let mut commits: Vec<(String, usize)> = Vec::new();
+    let mut unnamed = 0;
+    for r in &o.results {
+        match &r.commit {
+            Some(c) => {
+                let name = format!("`{c}`");
+                match commits.iter_mut().find(|(n, _)| *n == name) {
+                    Some((_, count)) => *count += 1,
+                    None => commits.push((name, 1)),
+                }
+            }
+            None => unnamed += 1,
+        }
+    }
+    let mut parts: Vec<String> = commits
+        .iter()
+        .map(|(name, n)| format!("{name} ({n} {})", if *n == 1 { "run" } else { "runs" }))
+        .collect();
+    if unnamed > 0 {
+        parts.push(format!(
+            "no commit named ({unnamed} {} written before records kept it)",
+            if unnamed == 1 { "record" } else { "records" }
+        ));
+    }
+    let _ = writeln!(
+        md,
+        "- Code: {}. `cargo xtask reproduce --check <record>` trains one run again with its \
+         record's settings and compares every number digit by digit.",
+        parts.join(", ")
+    );
 }
 
 /// "- How the runs stopped: horse-gallop 28 converged, 2 at the step budget, mean 6,340 steps

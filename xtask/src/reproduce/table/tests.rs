@@ -37,6 +37,7 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         rollbacks: None,
         copy_split: None,
         settings: None,
+        commit: None,
     }
 }
 
@@ -61,6 +62,7 @@ fn outcome(results: Vec<RunResult>) -> Outcome {
             command: "cargo xtask reproduce --quick".into(),
             progress: false,
             report_only: false,
+            commit: None,
         },
         sets: vec![LoadedSet {
             dataset,
@@ -302,7 +304,7 @@ fn the_header_describes_the_plan_and_how_converged_runs_stopped() {
             "- Every run trained until the validation loss converged (learning rate 1e-2 after \
              a 300-step warm-up, falling along a cosine to 1/32 of it over 1,200 steps, stop \
              after 200 steps without a new best once it has ended, the dense heads' at 0.3 of \
-             it; Adam's β₂ 0.95; budget 20,000 steps), as `meshvae train` does by default"
+             it; Adam's β₂ 0.95; a step's gradient clipped to 3× the recent norm; budget 20,000 steps), as `meshvae train` does by default"
         ),
         "{md}"
     );

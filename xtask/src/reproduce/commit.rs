@@ -1,0 +1,99 @@
+//! Which code made a record: the workspace's commit, as `git describe` names it, and whether
+//! tracked files had uncommitted changes.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::Path;
+use std::process::Command;
+
+/// The code of a run: [`RunResult::commit`](super::run::RunResult::commit).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Commit {
+    /// `git describe --always --abbrev=12`: the commit's hash, or the nearest tag and the
+    /// hash where a tag precedes it.
+    pub describe: String,
+    /// Whether tracked files differed from the commit: the numbers then come from code that
+    /// no commit holds.
+    pub dirty: bool,
+}
+
+impl Commit {
+    /// The commit checked out in `dir`, or `None` where `dir` is not a git work tree (a
+    /// source archive) or git is missing.
+    pub fn of(dir: &Path) -> Option<Self> {
+        let git = |args: &[&str]| {
+            let out = Command::new("git")
+                .arg("-C")
+                .arg(dir)
+                .args(args)
+                .output()
+                .ok()?;
+            out.status
+                .success()
+                .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+        };
+        let describe = git(&["describe", "--always", "--abbrev=12"])?;
+        // Untracked files (run folders, notes) do not change what the code computes.
+        let status = git(&["status", "--porcelain", "--untracked-files=no"])?;
+        Some(Self {
+            describe,
+            dirty: !status.is_empty(),
+        })
+    }
+
+    /// The commit's hash as `git describe` abbreviates it (without a tag).
+    pub fn hash(&self) -> &str {
+        match self.describe.rsplit_once("-g") {
+            Some((_, hash)) if hash.chars().all(|c| c.is_ascii_hexdigit()) => hash,
+            _ => &self.describe,
+        }
+    }
+}
+
+impl fmt::Display for Commit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.dirty {
+            write!(f, "{} with uncommitted changes", self.describe)
+        } else {
+            f.write_str(&self.describe)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_hash_is_read_with_or_without_a_tag() {
+        let commit = |describe: &str| Commit {
+            describe: describe.into(),
+            dirty: false,
+        };
+        assert_eq!(commit("e5c08e2a1b2c").hash(), "e5c08e2a1b2c");
+        assert_eq!(commit("v0.1-14-ge5c08e2a1b2c").hash(), "e5c08e2a1b2c");
+        assert_eq!(commit("release-good").hash(), "release-good");
+        let dirty = Commit {
+            dirty: true,
+            ..commit("e5c08e2a1b2c")
+        };
+        assert_eq!(dirty.to_string(), "e5c08e2a1b2c with uncommitted changes");
+    }
+
+    #[test]
+    fn this_workspace_names_its_commit_or_nothing() {
+        let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+        // A source archive has no .git; a clone always has a commit.
+        if let Some(commit) = Commit::of(here) {
+            assert!(!commit.describe.is_empty());
+            assert!(commit.hash().len() >= 7, "{commit:?}");
+        }
+        let nowhere = std::env::temp_dir().join(format!("xtask-no-git-{}", std::process::id()));
+        std::fs::create_dir_all(&nowhere).unwrap();
+        // Outside any work tree (the temporary folder is not inside one on a sane machine).
+        if Commit::of(&std::env::temp_dir()).is_none() {
+            assert!(Commit::of(&nowhere).is_none());
+        }
+        let _ = std::fs::remove_dir_all(&nowhere);
+    }
+}
