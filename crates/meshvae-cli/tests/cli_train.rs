@@ -401,3 +401,26 @@ fn a_model_the_engine_does_not_cover_says_so_in_training_and_in_eval() {
     let eval = meshvae(&["eval", s(&covered)]);
     assert!(!String::from_utf8_lossy(&eval.stderr).contains("runs on"));
 }
+
+/// The test loss is only watched: measured every 50 steps by default (and after the last
+/// epoch), every epoch with `--test-every 1`, and the weights do not depend on it.
+#[test]
+fn the_test_loss_is_measured_every_50_steps_and_changes_no_weight() {
+    let (dir, set, _) = synth_case("test-every", 4);
+    let test_losses = |out: &std::path::Path, extra: &[&str]| -> Vec<bool> {
+        ok(&train_short(&set, out, 4, extra));
+        std::fs::read_to_string(out.join("log.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|line| {
+                let record: serde_json::Value = serde_json::from_str(line).unwrap();
+                record["test_loss"].is_number()
+            })
+            .collect()
+    };
+    let (sparse, every) = (dir.join("sparse"), dir.join("every"));
+    assert_eq!(test_losses(&sparse, &[]), [false, false, false, true]);
+    assert_eq!(test_losses(&every, &["--test-every", "1"]), [true; 4]);
+    let weights = |out: &std::path::Path| std::fs::read(out.join("weights.safetensors")).unwrap();
+    assert_eq!(weights(&sparse), weights(&every));
+}
