@@ -163,6 +163,9 @@ impl Trainer<'_> {
         };
         self.phases.bookkeeping += book.elapsed().as_secs_f64();
         let book = Instant::now();
+        // Stamped again after the writes: `run.json`'s seconds then cover every phase it
+        // reports (the checkpoint keeps the stamp of its epoch).
+        self.progress.seconds = self.prior_seconds + self.start.elapsed().as_secs_f64();
         self.write_status(reason)?;
         self.last_write = Instant::now();
         self.phases.bookkeeping += book.elapsed().as_secs_f64();
