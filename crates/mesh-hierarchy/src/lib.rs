@@ -24,7 +24,8 @@
 //!   fine vertex.
 //! - `remesh`: a uniform remeshing as the coarse level, mean pooling over its clusters.
 //!
-//! [`Pooler`]'s documentation gives the exact definitions of the last two.
+//! [`Pooler`]'s documentation gives the exact definitions of the last two. [`spiral`] gives
+//! SpiralNet++'s spiral sequences on any level.
 //!
 //! ```
 //! use mesh_hierarchy::{Hierarchy, HierarchyConfig, Pooler};
@@ -45,6 +46,7 @@ mod hierarchy;
 pub mod laplacian;
 pub mod pooling;
 pub mod sampling;
+pub mod spiral;
 
 pub use error::HierarchyError;
 pub use file::{FORMAT, VERSION};
@@ -54,3 +56,4 @@ pub use laplacian::{
 };
 pub use pooling::{DepoolMode, PoolMode, Pooler, PoolingOp, UnknownDepoolMode, UnknownPooler};
 pub use sparse_csr::{CsrError, CsrMatrix};
+pub use spiral::{Spirals, spirals};

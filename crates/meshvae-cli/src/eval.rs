@@ -14,7 +14,7 @@ pub struct EvalArgs {
     /// The mesh set (default: the one the model was trained on, as recorded in its config).
     #[arg(long)]
     set: Option<PathBuf>,
-    /// Print one JSON object (keys: test_rms, test_rms_x1000, test_rms_rel, train_rms,
+    /// Print one JSON object (keys: net (ours, tan2018, coma or spiralnet), test_rms, test_rms_x1000, test_rms_rel, train_rms,
     /// train_rms_rel, mean_shape_rms, mean_shape_rms_rel, test_mean_distance,
     /// test_mean_distance_rigid, mean_shape_mean_distance_rigid, test_copy_in_training_meshes,
     /// test_copy_in_training_mean_distance_rigid, test_unseen_meshes,
@@ -60,7 +60,9 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
     let spikes = meshvae::loss_spikes(&log, meshvae::SPIKE_WINDOW, meshvae::SPIKE_FACTOR);
     let copy_in_training = report.copies.map(|c| c.copy_in_training);
     let unseen = report.copies.and_then(|c| c.unseen);
+    let net = trained.spec.model.net;
     let value = serde_json::json!({
+        "net": net.to_string(),
         "test_rms": report.test.rms,
         "test_rms_x1000": report.test.rms_x1000,
         "test_rms_rel": report.test.rms_rel,
@@ -150,6 +152,9 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         report.params.with_biases,
         report.params.without_biases
     );
+    if !net.is_ours() {
+        out!("  network      {net}: {}", net.defined_by());
+    }
     out!(
         "  epochs       {} (weights of epoch {}, chosen on the {} loss; {} validation meshes)",
         epochs.0,

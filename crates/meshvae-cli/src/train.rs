@@ -7,8 +7,8 @@ use deform_features::FeatureOptions;
 use mesh_hierarchy::{DepoolMode, HierarchyConfig};
 use mesh_io::{MeshSet, TriMesh};
 use meshvae::{
-    ConvKind, ModelConfig, ModelFolder, Pooler, Split, Structure, TrainConfig, TrainOptions,
-    TrainRequest,
+    ConvKind, ModelConfig, ModelFolder, Network, Pooler, Split, Structure, TrainConfig,
+    TrainOptions, TrainRequest,
 };
 use std::path::{Path, PathBuf};
 
@@ -72,6 +72,13 @@ pub struct TrainArgs {
     /// Seeds the split, the initial weights, the shuffles and the sampling [default: 1].
     #[arg(long)]
     seed: Option<u64>,
+    /// The auto-encoder: ours (the paper's), or one it is compared with, as its authors define
+    /// it: tan2018 (Tan et al.'s fully connected mesh VAE, on the same features), coma (CoMA,
+    /// on positions) or spiralnet (SpiralNet++, on positions). The others take their own
+    /// layers, latent size, loss and rate (1e-3), and the same split, schedule and stopping
+    /// rule as ours [default: ours].
+    #[arg(long)]
+    net: Option<Network>,
     /// Layers: C = convolution, P = pooling [default: CCPC].
     #[arg(long)]
     structure: Option<Structure>,
@@ -209,6 +216,36 @@ fn read_list(path: &Path) -> Result<Vec<String>, CliError> {
         .collect())
 }
 
+/// The flags that shape our network only, refused with another one (which is fixed as its
+/// authors define it), rather than silently ignored.
+fn refuse_ours_only_flags(args: &TrainArgs, net: Network) -> Result<(), CliError> {
+    if net.is_ours() {
+        return Ok(());
+    }
+    let given = [
+        ("--structure", args.structure.is_some()),
+        ("--conv", args.conv.is_some()),
+        ("--pool", args.pool.is_some()),
+        ("--k", args.k.is_some()),
+        ("--channels", args.channels.is_some()),
+        ("--no-batch-norm", args.no_batch_norm),
+        ("--last-encoder-tanh", args.last_encoder_tanh),
+        ("--depool", args.depool.is_some()),
+        ("--labels", args.labels.is_some()),
+        ("--conditional", args.conditional),
+    ];
+    match given.iter().find(|(_, on)| *on) {
+        Some((flag, _)) => Err(CliError::argument(
+            flag,
+            format!(
+                "shapes our network only; --net {net} is fixed as {}",
+                net.defined_by()
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     let mut set = load(&args.set)?;
     let folder = ModelFolder::new(&args.out);
@@ -231,14 +268,20 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
             set = set.with_labels(labels.clone())?;
         }
     }
-    let base_model = stored.as_ref().map(|s| s.model.clone()).unwrap_or_default();
+    let net = (args.net)
+        .or(stored.as_ref().map(|s| s.model.net))
+        .unwrap_or_default();
+    refuse_ours_only_flags(args, net)?;
+    let base_model = (stored.as_ref())
+        .map(|s| s.model.clone())
+        .unwrap_or_else(|| ModelConfig::for_network(net));
     let base_train = stored
         .as_ref()
         .map(|s| s.train.clone())
         .unwrap_or(TrainConfig {
             epochs: 300,
             steps: Some(meshvae::DEFAULT_MAX_STEPS),
-            ..TrainConfig::default()
+            ..TrainConfig::for_network(net)
         });
     let base_hierarchy = stored.as_ref().map(|s| s.hierarchy).unwrap_or_default();
     let features = stored
@@ -250,6 +293,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         });
 
     let model = ModelConfig {
+        net,
         structure: args
             .structure
             .clone()

@@ -6,12 +6,13 @@ use crate::candle::batch_norm::Mode;
 use crate::candle::model::MeshVae;
 use crate::cpu::Engine;
 use crate::error::{Result, VaeError};
+use crate::net::network::Input;
 use crate::train::folder::{ModelFolder, ModelSpec, SplitFile};
+use crate::train::scaling::InputScaling;
 use crate::train::split::{Selection, Split};
 use crate::train::{Executor, ExecutorKind};
 use candle_core::Device;
 use candle_core::Tensor;
-use deform_features::Normalization;
 use mesh_hierarchy::Hierarchy;
 use mesh_io::TriMesh;
 use std::path::Path;
@@ -24,7 +25,8 @@ pub struct TrainedModel {
     pub spec: ModelSpec,
     pub model: MeshVae,
     pub hierarchy: Hierarchy,
-    pub normalization: Normalization,
+    /// How the network's inputs are scaled (features into ±0.95, or positions standardised).
+    pub normalization: InputScaling,
     pub split: Split,
     pub template: TriMesh,
     /// Which loss chose the loaded weights.
@@ -51,8 +53,11 @@ impl TrainedModel {
         let spec = folder.read_spec()?;
         spec.check_labels(dir)?;
         let hierarchy = Hierarchy::load(&folder.hierarchy())?;
-        let normalization: Normalization = folder.read_json(&folder.normalization())?;
-        normalization.validate()?;
+        let normalization: InputScaling = folder.read_json(&folder.normalization())?;
+        let positions = spec.model.net.input() == Input::Positions;
+        normalization
+            .validate(spec.vertices, positions)
+            .map_err(|e| VaeError::model(folder.normalization(), e.to_string()))?;
         let split_file: SplitFile = folder.read_json(&folder.split())?;
         let split = split_file.split();
         split

@@ -19,6 +19,11 @@
 //! (`ModelConfig::labels`) also takes each mesh's label (see `candle/model/cond.rs`); generation,
 //! interpolation and embedding work on the trained folder ([`TrainedModel`]).
 //!
+//! The same pipeline trains the auto-encoders the paper is compared with ([`Network`], set in
+//! `ModelConfig::net`): Tan et al.'s fully connected mesh VAE on the same features, and CoMA and
+//! SpiralNet++ on vertex positions (standardised per vertex, [`InputScaling`]), each as its
+//! authors define it, on candle's autograd.
+//!
 //! The defaults are the paper's network as the authors' code runs it (`CCPC`, Chebyshev K = 3,
 //! 9 channels, latent 128, batch norm, σ = sqrt(2·sigmoid), decoder FC tied to the μ head, loss
 //! weights 40 / 3 / 1, Adam, batch 50); where that code departs from the paper's text,
@@ -74,6 +79,7 @@ pub use error::{Result, VaeError};
 /// the command line to the operators, which say how they apply ([`PoolMode`]).
 pub use mesh_hierarchy::{PoolMode, Pooler};
 pub use net::config::{ConvKind, ConvSpec, FEATURE_CHANNELS, ModelConfig};
+pub use net::network::{Activation, GraphConvKind, Input, Network, RecLoss};
 pub use net::params::{ParamCount, param_count};
 pub use net::structure::{Layer, Structure};
 
@@ -91,9 +97,10 @@ pub use train::config::{
     DEFAULT_BETA2, DEFAULT_GRAD_CLIP, DEFAULT_HEAD_LR_SCALE, DEFAULT_MAX_STEPS,
     DEFAULT_NORMALIZE_QUANTILE, TrainConfig,
 };
-pub use train::data::{MeshData, NormalizationFit, denormalize};
+pub use train::data::{Inputs, MeshData, NormalizationFit, denormalize};
 pub use train::folder::{ModelFolder, ModelSpec, SplitFile};
 pub use train::loss::{Loss, LossWeights};
+pub use train::scaling::{InputScaling, PositionScaling};
 pub use train::schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
 pub use train::split::{Selection, Split, resolve_mesh};
 pub use train::{

@@ -301,7 +301,23 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
     for &dataset in &options.datasets {
         let loaded = load(dataset, options.quick)?;
         let mut pending = Vec::new();
+        let vertices = loaded.set.vertex_count();
+        let mut too_small = Vec::new();
         for run in runs.iter().filter(|r| r.dataset.name == dataset.name) {
+            let net = run.column.net;
+            if vertices < net.min_vertices() {
+                if !too_small.contains(&net) {
+                    too_small.push(net);
+                    notes.push(format!(
+                        "{net} is not run on {} ({vertices} vertices): it samples the template \
+                         down by 4 four times, which needs at least {}.",
+                        dataset.name,
+                        net.min_vertices()
+                    ));
+                }
+                runs_bar.inc(1);
+                continue;
+            }
             let record = run::recorded(run, options.records())?;
             if let Recorded::Current(done) = record {
                 reused += 1;

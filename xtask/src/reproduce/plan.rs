@@ -7,7 +7,7 @@
 //! until the validation loss converges ([`Budget`]).
 
 use super::paper::AblationColumn;
-use meshvae::{ConvKind, DEFAULT_MAX_STEPS, ModelConfig, Pooler, Structure, TrainConfig};
+use meshvae::{ConvKind, DEFAULT_MAX_STEPS, ModelConfig, Network, Pooler, Structure, TrainConfig};
 use std::path::{Path, PathBuf};
 
 /// Which of the paper's tables a column belongs to.
@@ -17,6 +17,8 @@ pub enum Group {
     Ablation,
     /// The structure table (our pooling, other layer strings).
     Structure,
+    /// The other auto-encoders (`table:ERMS`, and SpiralNet++), each as its authors define it.
+    Framework,
 }
 
 /// One network variant.
@@ -32,6 +34,9 @@ pub struct Column {
     pub structure: &'static str,
     pub conv: ConvKind,
     pub pool: Pooler,
+    /// The auto-encoder: ours (shaped by the three fields above) or another one, fixed as its
+    /// authors define it (the three fields are then unused).
+    pub net: Network,
 }
 
 impl Column {
@@ -41,8 +46,11 @@ impl Column {
     }
 
     /// The model configuration: the paper's defaults with this column's structure, convolution
-    /// and pooling.
+    /// and pooling, or the other network's own.
     pub fn model(&self) -> Result<ModelConfig, meshvae::VaeError> {
+        if !self.net.is_ours() {
+            return Ok(ModelConfig::for_network(self.net));
+        }
         Ok(ModelConfig {
             structure: self.structure.parse::<Structure>()?,
             conv: self.conv,
@@ -67,6 +75,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spatial,
         pool: Pooler::None,
+        net: Network::Ours,
     },
     Column {
         id: "no-pool",
@@ -76,6 +85,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::None,
+        net: Network::Ours,
     },
     Column {
         id: "qem",
@@ -85,6 +95,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Qem,
+        net: Network::Ours,
     },
     Column {
         id: "remesh",
@@ -94,6 +105,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Remesh,
+        net: Network::Ours,
     },
     Column {
         id: "graph",
@@ -103,6 +115,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Graph,
+        net: Network::Ours,
     },
     Column {
         id: "sampling",
@@ -112,6 +125,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Sampling,
+        net: Network::Ours,
     },
     Column {
         id: "max",
@@ -121,6 +135,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Max,
+        net: Network::Ours,
     },
     Column {
         id: OURS,
@@ -130,6 +145,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Mean,
+        net: Network::Ours,
     },
     Column {
         id: "cpcpc",
@@ -139,6 +155,7 @@ pub const COLUMNS: &[Column] = &[
         structure: "CPCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Mean,
+        net: Network::Ours,
     },
     Column {
         id: "ccpccpc",
@@ -148,6 +165,37 @@ pub const COLUMNS: &[Column] = &[
         structure: "CCPCCPC",
         conv: ConvKind::Spectral,
         pool: Pooler::Mean,
+        net: Network::Ours,
+    },
+    Column {
+        id: "tan2018",
+        label: "Tan et al. 2018 (mesh VAE, fully connected)",
+        group: Group::Framework,
+        paper: None,
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: Pooler::None,
+        net: Network::Tan2018,
+    },
+    Column {
+        id: "coma",
+        label: "Ranjan et al. 2018 (CoMA)",
+        group: Group::Framework,
+        paper: None,
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: Pooler::Sampling,
+        net: Network::Coma,
+    },
+    Column {
+        id: "spiralnet",
+        label: "Gong et al. 2019 (SpiralNet++)",
+        group: Group::Framework,
+        paper: None,
+        structure: "CCPC",
+        conv: ConvKind::Spectral,
+        pool: Pooler::Sampling,
+        net: Network::SpiralNet,
     },
 ];
 
@@ -333,6 +381,7 @@ impl Run {
     /// ranges (the authors'), as every run recorded before the converged plan; the converged plan trains as `meshvae
     /// train` does given no budget (default rate and schedule, at most `max_steps` steps).
     pub fn train_config(&self) -> TrainConfig {
+        let net = TrainConfig::for_network(self.column.net);
         let mut train = match self.budget {
             Budget::Epochs(epochs) => TrainConfig {
                 epochs,
@@ -342,11 +391,11 @@ impl Run {
                 adam_beta2: meshvae::AdamConfig::default().beta2,
                 head_lr_scale: 1.0,
                 grad_clip: 0.0,
-                ..TrainConfig::default()
+                ..net
             },
             Budget::Converged { max_steps } => TrainConfig {
                 steps: Some(max_steps),
-                ..TrainConfig::default()
+                ..net
             },
         };
         train.seed = self.seed;
@@ -422,8 +471,23 @@ mod tests {
         for c in COLUMNS {
             let model = c.model().unwrap();
             model.validate().unwrap();
-            assert_eq!(model.structure.to_string(), c.structure);
+            assert_eq!(model.net, c.net);
+            if c.net.is_ours() {
+                assert_eq!(model.structure.to_string(), c.structure);
+            }
         }
+        // The other networks train at their authors' rate with their loss.
+        let coma = runs(
+            &[dataset("horse-gallop").unwrap()],
+            &[column("coma").unwrap()],
+            &PROTOCOLS[0],
+            Budget::CONVERGED,
+            &[1],
+            false,
+        )[0];
+        let train = coma.train_config();
+        assert_eq!((train.lr, train.loss.kl), (1e-3, 0.0));
+        assert_eq!(coma.column.model().unwrap().latent, 8);
         // Every column of the paper's ablation is run, in the paper's order.
         let covered: Vec<AblationColumn> = COLUMNS.iter().filter_map(|c| c.paper).collect();
         assert_eq!(covered, AblationColumn::ALL);

@@ -7,6 +7,7 @@ use crate::error::{Result, VaeError};
 use crate::folder::TrainedModel;
 use crate::net::params::ParamCount;
 use crate::train::data::denormalize;
+use crate::train::scaling::InputScaling;
 use candle_core::{Device, Tensor};
 use deform_features::{CHANNELS, FeatureExtractor, FeatureSet, Reconstructor, RestMesh};
 use mesh_io::{MeshSet, Point, ShapeGroups};
@@ -72,7 +73,8 @@ impl TrainedModel {
         Ok(FeatureExtractor::new(self.rest()?, self.spec.features)?)
     }
 
-    /// Normalised features of the meshes `ids` of `set` as `[B, V, 9]`.
+    /// The network's scaled inputs of the meshes `ids` of `set`: features `[B, V, 9]` (from
+    /// `extractor`), or for a position network the standardised positions `[B, V, 3]`.
     pub fn encode_input(
         &self,
         extractor: &FeatureExtractor,
@@ -80,24 +82,59 @@ impl TrainedModel {
         ids: &[usize],
         device: &Device,
     ) -> Result<Tensor> {
-        let subset = set.subset(ids)?;
-        let raw = extractor.extract(&subset)?.features;
-        let normalized = self.normalization.apply(&raw);
+        let (values, channels) = match &self.normalization {
+            InputScaling::Features(normalization) => {
+                let raw = extractor.extract(&set.subset(ids)?)?.features;
+                (normalization.apply(&raw).into_vec(), CHANNELS)
+            }
+            InputScaling::Positions(scaling) => {
+                let mut values = Vec::with_capacity(ids.len() * set.vertex_count() * 3);
+                for &i in ids {
+                    if i >= set.len() {
+                        return Err(VaeError::argument(
+                            "mesh index",
+                            format!("{i} is out of range ({} meshes)", set.len()),
+                        ));
+                    }
+                    values.extend(scaling.apply(set.frame(i)));
+                }
+                (values, 3)
+            }
+        };
         Ok(Tensor::from_vec(
-            normalized.into_vec(),
-            (ids.len(), set.vertex_count(), CHANNELS),
+            values,
+            (ids.len(), set.vertex_count(), channels),
             device,
         )?)
     }
 
-    /// Positions from network outputs in normalised units `[B, V, 9]`.
+    /// Positions from network outputs in scaled units `[B, V, C]`: features through
+    /// `reconstructor`'s Poisson solve, or a position network's output un-standardised.
     pub fn positions_from_output(
         &self,
         reconstructor: &Reconstructor,
         output: &Tensor,
     ) -> Result<Vec<Vec<[f64; 3]>>> {
-        let raw: FeatureSet = denormalize(&self.normalization, output)?;
-        Ok(reconstructor.reconstruct_all(&raw)?)
+        match &self.normalization {
+            InputScaling::Features(normalization) => {
+                let raw: FeatureSet = denormalize(normalization, output)?;
+                Ok(reconstructor.reconstruct_all(&raw)?)
+            }
+            InputScaling::Positions(scaling) => {
+                let (b, v, c) = output.dims3()?;
+                if c != 3 || v * 3 != scaling.position_mean.len() {
+                    return Err(VaeError::shape(
+                        "positions_from_output",
+                        format!("output of shape [{b}, {v}, {c}] for a position network"),
+                    ));
+                }
+                let flat: Vec<f32> = output.flatten_all()?.to_vec1()?;
+                Ok(flat
+                    .chunks_exact(v * 3)
+                    .map(|m| scaling.invert(m))
+                    .collect())
+            }
+        }
     }
 
     /// Reconstructions (z = μ) of the meshes `ids` of `set`.

@@ -17,11 +17,15 @@ pub(crate) mod vars;
 pub(crate) use cond::{LABEL_SCALE, pick as pick_labels, unknown_label};
 pub(crate) use file::{entry as tensor_entry, stamped_error};
 
+use crate::candle::baseline::BaselineNet;
 use crate::candle::batch_norm::Mode;
 use crate::error::{Result, VaeError};
-use crate::net::config::{FEATURE_CHANNELS, ModelConfig};
+use crate::net::baseline::BaselinePlan;
+use crate::net::config::ModelConfig;
+use crate::net::network::Input;
 use crate::net::params::ParamCount;
 use crate::net::plan::NetPlan;
+use crate::net::vars::VarPlan;
 use crate::numerics::rng::Rng;
 use candle_core::backprop::GradStore;
 use candle_core::{DType, Device, Tensor, Var};
@@ -36,20 +40,34 @@ pub struct Encoded {
     pub sigma: Tensor,
 }
 
-/// The mesh VAE on one hierarchy.
+/// The mesh VAE on one hierarchy: the paper's network, or one of the others it is compared with
+/// ([`crate::Network`]; `baseline.rs`).
 #[derive(Debug, Clone)]
 pub struct MeshVae {
     config: ModelConfig,
     dtype: DType,
     device: Device,
-    /// The layer list and variables every executor reads.
-    plan: Arc<NetPlan>,
     /// Vertex counts of the levels the network uses (0 ..= number of poolings).
     vertex_counts: Vec<usize>,
     /// The trained variables, by [`crate::net::vars::ParamId`].
     params: Vec<Var>,
     /// The batch norms' running statistics, by [`crate::net::vars::StateId`].
     state: Vec<Var>,
+    body: Body,
+}
+
+/// The layers of the network.
+#[derive(Debug, Clone)]
+enum Body {
+    Ours(Box<Ours>),
+    Baseline(Box<BaselineNet>),
+}
+
+/// The paper's network.
+#[derive(Debug, Clone)]
+struct Ours {
+    /// The layer list and variables every executor reads.
+    plan: Arc<NetPlan>,
     /// The encoder's stages, one per step of the plan.
     enc: Vec<Stage>,
     /// The decoder's stages in the order they run.
@@ -90,8 +108,24 @@ impl MeshVae {
                 format!("{dtype:?}; the model runs in f32 or f64"),
             ));
         }
-        let plan = NetPlan::new(config, hierarchy)?;
         let mut rng = Rng::new(seed);
+        if !config.net.is_ours() {
+            let counts = hierarchy.vertex_counts();
+            let levels = counts.len().min(config.pool_levels() + 1);
+            let plan = BaselinePlan::new(config.net, config.latent, &counts[..levels])?;
+            let params = vars::create(&plan.params, config.init_std, dtype, device, &mut rng)?;
+            let net = BaselineNet::new(plan, hierarchy, &params, device)?;
+            return Ok(Self {
+                config: config.clone(),
+                dtype,
+                device: device.clone(),
+                vertex_counts: net.plan.vertex_counts.clone(),
+                params,
+                state: Vec::new(),
+                body: Body::Baseline(Box::new(net)),
+            });
+        }
+        let plan = NetPlan::new(config, hierarchy)?;
         let params = vars::create(&plan.params, config.init_std, dtype, device, &mut rng)?;
         let state = vars::create(&plan.state, config.init_std, dtype, device, &mut rng)?;
         let (enc, dec) = build::stages(config, &plan, &params, &state, device)?;
@@ -102,28 +136,54 @@ impl MeshVae {
             sigma: t(l.sigma),
             dec: t(l.dec),
         });
-        Ok(Self {
+        let ours = Ours {
             label_weights,
             w_mu: t(heads.w_mu),
             b_mu: t(heads.b_mu),
             w_sigma: t(heads.w_sigma),
             b_sigma: t(heads.b_sigma),
             b_dec: t(heads.b_dec),
+            plan: Arc::new(plan),
+            enc,
+            dec,
+        };
+        Ok(Self {
             config: config.clone(),
             dtype,
             device: device.clone(),
-            vertex_counts: plan.vertex_counts(),
-            plan: Arc::new(plan),
+            vertex_counts: ours.plan.vertex_counts(),
             params,
             state,
-            enc,
-            dec,
+            body: Body::Ours(Box::new(ours)),
         })
     }
 
     /// The layer list and variables the model was built from (what the CPU engine reads).
-    pub(crate) fn plan(&self) -> &NetPlan {
-        &self.plan
+    /// `None` for the other networks, which the engine does not run.
+    pub(crate) fn plan(&self) -> Option<&NetPlan> {
+        match &self.body {
+            Body::Ours(o) => Some(&o.plan),
+            Body::Baseline(_) => None,
+        }
+    }
+
+    /// The network's trained and state variables as planned (names, shapes, starts).
+    fn var_plans(&self) -> (&[VarPlan], &[VarPlan]) {
+        match &self.body {
+            Body::Ours(o) => (&o.plan.params, &o.plan.state),
+            Body::Baseline(b) => (&b.plan.params, &[]),
+        }
+    }
+
+    /// The paper's network's layers, or an error naming `op` for the others.
+    fn ours(&self, op: &'static str) -> Result<&Ours> {
+        match &self.body {
+            Body::Ours(o) => Ok(o),
+            Body::Baseline(_) => Err(VaeError::argument(
+                "net",
+                format!("{op} is defined for ours only, not {}", self.config.net),
+            )),
+        }
     }
 
     pub fn config(&self) -> &ModelConfig {
@@ -154,22 +214,23 @@ impl MeshVae {
 
     /// The trained variables, sorted by name (the order the optimiser and the L2 term use).
     pub fn trainable_vars(&self) -> Vec<(String, Var)> {
-        (self.plan.params.iter().zip(&self.params))
+        (self.var_plans().0.iter().zip(&self.params))
             .map(|(p, v)| (p.name.clone(), v.clone()))
             .collect()
     }
 
     /// The batch norms' running means and variances, sorted by name.
     pub fn state_vars(&self) -> Vec<(String, Var)> {
-        (self.plan.state.iter().zip(&self.state))
+        (self.var_plans().1.iter().zip(&self.state))
             .map(|(p, v)| (p.name.clone(), v.clone()))
             .collect()
     }
 
     /// Every variable, trained then state, with its name.
     pub(crate) fn named_vars(&self) -> impl Iterator<Item = (&String, &Var)> {
-        let trained = self.plan.params.iter().zip(&self.params);
-        let state = self.plan.state.iter().zip(&self.state);
+        let (params, state) = self.var_plans();
+        let trained = params.iter().zip(&self.params);
+        let state = state.iter().zip(&self.state);
         trained.chain(state).map(|(p, v)| (&p.name, v))
     }
 
@@ -181,18 +242,7 @@ impl MeshVae {
 
     /// Weights and biases (BN γ, β count as biases) actually created.
     pub fn param_count(&self) -> ParamCount {
-        let (mut with_biases, mut without_biases) = (0, 0);
-        for p in &self.plan.params {
-            let n = p.len();
-            with_biases += n;
-            if !p.bias {
-                without_biases += n;
-            }
-        }
-        ParamCount {
-            with_biases,
-            without_biases,
-        }
+        crate::net::params::count_of(self.var_plans().0)
     }
 
     /// The labels of a conditional model, in one-hot order (empty for an unconditional one).
@@ -223,18 +273,27 @@ impl MeshVae {
     pub fn encode_cond(&self, x: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Encoded> {
         self.check_input("MeshVae::encode", x)?;
         let label = self.check_labels("MeshVae::encode", c, x.dim(0)?)?;
+        let o = match &self.body {
+            Body::Ours(o) => o,
+            Body::Baseline(b) => {
+                let (mu, sigma) = b.encode(x)?;
+                // A plain auto-encoder's posterior is the point μ.
+                let sigma = sigma.map_or_else(|| mu.zeros_like(), Ok)?;
+                return Ok(Encoded { mu, sigma });
+            }
+        };
         let batch = x.dim(0)?;
         // Vertex-major inside the network: see `spectral_conv`'s layouts.
         let mut h = x.transpose(0, 1)?.contiguous()?;
-        for stage in &self.enc {
+        for stage in &o.enc {
             h = self.run(stage, &h, mode)?;
         }
         let flat = h
             .transpose(0, 1)?
             .contiguous()?
             .reshape((batch, self.flat_width()))?;
-        let mut mu = flat.matmul(&self.w_mu)?.broadcast_add(&self.b_mu)?;
-        let mut s = flat.matmul(&self.w_sigma)?.broadcast_add(&self.b_sigma)?;
+        let mut mu = flat.matmul(&o.w_mu)?.broadcast_add(&o.b_mu)?;
+        let mut s = flat.matmul(&o.w_sigma)?.broadcast_add(&o.b_sigma)?;
         if let Some((c, w)) = label {
             mu = (mu + c.matmul(&w.mu)?)?;
             s = (s + c.matmul(&w.sigma)?)?;
@@ -252,13 +311,20 @@ impl MeshVae {
     /// when the model is conditional).
     pub fn decode_cond(&self, z: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Tensor> {
         let batch = self.check_latent("MeshVae::decode", z, None)?;
+        let o = match &self.body {
+            Body::Ours(o) => o,
+            Body::Baseline(b) => {
+                self.check_labels("MeshVae::decode", c, batch)?;
+                return b.decode(z);
+            }
+        };
         let coarse = self.vertex_counts[self.vertex_counts.len() - 1];
         let mut h = self
             .decoder_fc_cond(z, c)?
             .reshape((batch, coarse, self.config.channels))?
             .transpose(0, 1)?
             .contiguous()?;
-        for stage in &self.dec {
+        for stage in &o.dec {
             h = self.run(stage, &h, mode)?;
         }
         Ok(h.transpose(0, 1)?.contiguous()?)
@@ -304,7 +370,8 @@ impl MeshVae {
     /// The decoder's dense layer: zW_μᵀ + b_dec (+ c·W_dc for a conditional model).
     pub(crate) fn decoder_fc_cond(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
         let label = self.check_labels("MeshVae::decode", c, z.dim(0)?)?;
-        let h = z.matmul(&self.w_mu.t()?)?.broadcast_add(&self.b_dec)?;
+        let o = self.ours("the decoder's dense layer")?;
+        let h = z.matmul(&o.w_mu.t()?)?.broadcast_add(&o.b_dec)?;
         Ok(match label {
             Some((c, w)) => (h + c.matmul(&w.dec)?)?,
             None => h,
@@ -319,7 +386,11 @@ impl MeshVae {
         c: Option<&'a Tensor>,
         batch: usize,
     ) -> Result<Option<(&'a Tensor, &'a cond::LabelWeights)>> {
-        match (c, &self.label_weights) {
+        let label_weights = match &self.body {
+            Body::Ours(o) => &o.label_weights,
+            Body::Baseline(_) => &None,
+        };
+        match (c, label_weights) {
             (None, None) => Ok(None),
             (Some(_), None) => Err(VaeError::argument(
                 "label",
@@ -365,7 +436,8 @@ impl MeshVae {
 
     /// The encoder's convolution blocks, in order (index = `spec.index`).
     pub(crate) fn encoder_blocks(&self) -> impl Iterator<Item = &ConvBlock> {
-        self.enc.iter().filter_map(|s| match s {
+        let enc = self.plan_stages().0;
+        enc.iter().filter_map(|s| match s {
             Stage::Conv(b) => Some(b),
             _ => None,
         })
@@ -374,7 +446,8 @@ impl MeshVae {
     /// The decoder's convolution blocks, in the order they run.
     #[cfg(test)]
     pub(crate) fn decoder_blocks(&self) -> impl Iterator<Item = &ConvBlock> {
-        self.dec.iter().filter_map(|s| match s {
+        let dec = self.plan_stages().1;
+        dec.iter().filter_map(|s| match s {
             Stage::Conv(b) => Some(b),
             _ => None,
         })
@@ -399,17 +472,33 @@ impl MeshVae {
     }
 
     fn flat_width(&self) -> usize {
-        self.plan.flat_width()
+        match &self.body {
+            Body::Ours(o) => o.plan.flat_width(),
+            Body::Baseline(b) => b.plan.flat_width(),
+        }
+    }
+
+    /// The paper's network's encoder and decoder stages (none for the others).
+    fn plan_stages(&self) -> (&[Stage], &[Stage]) {
+        match &self.body {
+            Body::Ours(o) => (&o.enc, &o.dec),
+            Body::Baseline(_) => (&[], &[]),
+        }
     }
 
     fn check_input(&self, op: &'static str, x: &Tensor) -> Result<()> {
         let v = self.vertex_count();
-        let ok_shape = matches!(x.dims(), &[b, xv, c] if b > 0 && xv == v && c == FEATURE_CHANNELS);
+        let channels = self.config.net.input().channels();
+        let ok_shape = matches!(x.dims(), &[b, xv, c] if b > 0 && xv == v && c == channels);
         if !ok_shape {
+            let what = match self.config.net.input() {
+                Input::Features => "features",
+                Input::Positions => "positions",
+            };
             return Err(VaeError::shape(
                 op,
                 format!(
-                    "features of shape {:?}; the model expects [B ≥ 1, {v}, {FEATURE_CHANNELS}]",
+                    "{what} of shape {:?}; the model expects [B ≥ 1, {v}, {channels}]",
                     x.dims()
                 ),
             ));

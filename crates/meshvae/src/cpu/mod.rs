@@ -92,6 +92,9 @@ impl Engine {
     /// Why the engine cannot train `model`, or `None` if it can.
     pub fn unsupported(model: &MeshVae) -> Option<String> {
         let c = model.config();
+        if !c.net.is_ours() {
+            return Some(format!("the network {} (it runs ours only)", c.net));
+        }
         if !model.device().is_cpu() {
             return Some("the model is not on the CPU".into());
         }

@@ -2,6 +2,7 @@
 //! layer plan ([`ConvSpec`]) that both the model and the parameter count are built from.
 
 use crate::error::{Result, VaeError};
+use crate::net::network::Network;
 use crate::net::structure::{Layer, Structure};
 use mesh_hierarchy::{HierarchyConfig, Pooler};
 use serde::{Deserialize, Serialize};
@@ -54,6 +55,11 @@ names!(ConvKind, "conv", Spectral => "spectral", Spatial => "spatial");
 /// paper's text.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModelConfig {
+    /// Which auto-encoder: ours (built from the fields below) or one of the others, which are
+    /// fixed as their authors define them and read only `latent` ([`Network`]). Absent from the
+    /// JSON of our network's models.
+    #[serde(default, skip_serializing_if = "Network::is_ours")]
+    pub net: Network,
     /// Encoder layers, e.g. `CCPC`; the decoder mirrors them.
     pub structure: Structure,
     pub conv: ConvKind,
@@ -84,6 +90,7 @@ pub struct ModelConfig {
 impl Default for ModelConfig {
     fn default() -> Self {
         Self {
+            net: Network::Ours,
             structure: Structure::default(),
             conv: ConvKind::Spectral,
             pool: Pooler::Mean,
@@ -115,19 +122,43 @@ pub struct ConvSpec {
 }
 
 impl ModelConfig {
+    /// The configuration of `net`: ours as [`Self::default`], the others with their authors'
+    /// latent size.
+    pub fn for_network(net: Network) -> Self {
+        Self {
+            net,
+            latent: net.default_latent(),
+            ..Self::default()
+        }
+    }
+
     /// Number of pooling steps = number of P in the structure. With `pool = none` the hierarchy
     /// still has that many (identity) steps, every level being the template.
     pub fn pool_levels(&self) -> usize {
-        self.structure.pools()
+        self.net
+            .pool_levels()
+            .unwrap_or_else(|| self.structure.pools())
     }
 
-    /// `HierarchyConfig::default()` with this configuration's pooler and level count.
+    /// `HierarchyConfig::default()` with this configuration's pooler and level count (for the
+    /// position networks, CoMA's sampling, keeping 1/4 of the vertices at each level).
     pub fn hierarchy_config(&self) -> HierarchyConfig {
+        let (pooler, ratio) = match self.net.position_net() {
+            Some(net) => (Pooler::Sampling, 1.0 / net.factor as f64),
+            None if self.net == Network::Tan2018 => (Pooler::None, 0.5),
+            None => (self.pool, HierarchyConfig::default().ratio),
+        };
         HierarchyConfig {
-            pooler: self.pool,
+            pooler,
             levels: self.pool_levels(),
+            ratio,
             ..HierarchyConfig::default()
         }
+    }
+
+    /// The pooler of the model's hierarchy (ours: `pool`; the others' own).
+    pub fn pooler(&self) -> Pooler {
+        self.hierarchy_config().pooler
     }
 
     /// Whether the model is a conditional VAE (it has labels).
@@ -164,6 +195,15 @@ impl ModelConfig {
             return Err(VaeError::argument(
                 "init_std",
                 format!("{} is not a finite non-negative number", self.init_std),
+            ));
+        }
+        if !self.net.is_ours() && self.is_conditional() {
+            return Err(VaeError::argument(
+                "labels",
+                format!(
+                    "a conditional model is ours only; {} takes no labels",
+                    self.net
+                ),
             ));
         }
         for (i, l) in self.labels.iter().enumerate() {

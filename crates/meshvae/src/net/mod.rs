@@ -4,7 +4,9 @@
 //! the variables (named once, in [`vars`]) and the layer list every executor reads
 //! ([`plan::NetPlan`]). Nothing here knows candle, the CPU engine or training.
 
+pub(crate) mod baseline;
 pub(crate) mod config;
+pub(crate) mod network;
 pub(crate) mod params;
 pub(crate) mod plan;
 pub(crate) mod structure;

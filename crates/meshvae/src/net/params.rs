@@ -9,7 +9,9 @@
 //! L·latent into each head and L·V_L·C into the decoder's dense layer. With L = 0 the count is
 //! the paper's.
 
+use crate::net::baseline::BaselinePlan;
 use crate::net::config::{ConvKind, ConvSpec, ModelConfig};
+use crate::net::vars::VarPlan;
 
 /// Trained scalars, with and without biases (biases include batch norm's γ and β).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -22,7 +24,22 @@ pub struct ParamCount {
 /// first; only the last one, the coarsest level the network reaches, matters, so a hierarchy's
 /// `vertex_counts()` truncated to `config.pool_levels() + 1` entries is what to pass). An empty
 /// slice counts as zero vertices.
+///
+/// The other networks ([`crate::Network`]) count every variable of their plan; they need the
+/// counts of every level they use (template first), and count zero where those are missing.
 pub fn param_count(config: &ModelConfig, vertex_counts: &[usize]) -> ParamCount {
+    if !config.net.is_ours() {
+        let plan = (!vertex_counts.is_empty())
+            .then(|| BaselinePlan::new(config.net, config.latent, vertex_counts).ok())
+            .flatten();
+        return plan.map_or(
+            ParamCount {
+                with_biases: 0,
+                without_biases: 0,
+            },
+            |p| count_of(&p.params),
+        );
+    }
     let coarse = vertex_counts.last().copied().unwrap_or(0);
     let conv_weights = |s: &ConvSpec| match config.conv {
         ConvKind::Spectral => s.c_in * config.k * s.c_out,
@@ -46,6 +63,21 @@ pub fn param_count(config: &ModelConfig, vertex_counts: &[usize]) -> ParamCount 
     ParamCount {
         with_biases: weights + biases,
         without_biases: weights,
+    }
+}
+
+/// The count of a list of variables (biases: [`VarPlan::bias`]).
+pub(crate) fn count_of(params: &[VarPlan]) -> ParamCount {
+    let (mut with_biases, mut without_biases) = (0, 0);
+    for p in params {
+        with_biases += p.len();
+        if !p.bias {
+            without_biases += p.len();
+        }
+    }
+    ParamCount {
+        with_biases,
+        without_biases,
     }
 }
 

@@ -29,6 +29,8 @@ pub(crate) enum Init {
     Normal,
     Zeros,
     Ones,
+    /// U(−bound, bound), drawn from the model's generator (Glorot: √(6 / (fan_in + fan_out))).
+    Uniform(f64),
 }
 
 /// One variable to create.
@@ -119,6 +121,19 @@ impl VarList {
     /// A trained weight drawn from N(0, init_std²).
     pub fn weight(&mut self, name: &str, shape: Vec<usize>) -> ParamHandle {
         self.param(name.to_owned(), shape, Init::Normal)
+    }
+
+    /// A trained weight drawn Glorot-uniform for a layer of `fan_in` inputs and `fan_out`
+    /// outputs.
+    pub fn glorot_weight(
+        &mut self,
+        name: &str,
+        shape: Vec<usize>,
+        fan_in: usize,
+        fan_out: usize,
+    ) -> ParamHandle {
+        let bound = (6.0 / (fan_in + fan_out).max(1) as f64).sqrt();
+        self.param(name.to_owned(), shape, Init::Uniform(bound))
     }
 
     /// A trained weight starting at zero (a label weight: see the conditional model).

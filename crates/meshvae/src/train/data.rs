@@ -1,23 +1,70 @@
 //! [`MeshData`]: a mesh set turned into what the network eats — ACAP features of every mesh,
-//! normalised into ±0.95 by ranges fitted on the training split only, and batches of them as
-//! `[B, V, 9]` tensors (with, for a conditional model, each mesh's one-hot label).
+//! normalised into ±0.95 by ranges fitted on the training split only (or, for the position
+//! networks, the positions standardised per vertex on the training split), and batches of them
+//! as `[B, V, C]` tensors (with, for a conditional model, each mesh's one-hot label).
 
 use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
+use crate::train::scaling::{InputScaling, PositionScaling};
 use crate::train::split::Split;
 use candle_core::{Device, Tensor};
 use deform_features::{CHANNELS, FeatureExtractor, FeatureOptions, FeatureSet, Normalization};
 use mesh_io::MeshSet;
 
-/// Features of a set, their normalisation, and the split they were fitted on.
+/// Every mesh's scaled network input, f32 `[N, V, C]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Inputs {
+    frames: usize,
+    vertices: usize,
+    channels: usize,
+    data: Vec<f32>,
+}
+
+impl Inputs {
+    fn new(frames: usize, vertices: usize, channels: usize, data: Vec<f32>) -> Self {
+        debug_assert_eq!(data.len(), frames * vertices * channels);
+        Self {
+            frames,
+            vertices,
+            channels,
+            data,
+        }
+    }
+
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    pub fn vertices(&self) -> usize {
+        self.vertices
+    }
+
+    /// Values per vertex: 9 features or 3 coordinates.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// Mesh `i`'s values `[V·C]`.
+    pub fn frame(&self, i: usize) -> &[f32] {
+        let n = self.vertices * self.channels;
+        &self.data[i * n..(i + 1) * n]
+    }
+
+    /// Every value `[N·V·C]`.
+    pub fn as_slice(&self) -> &[f32] {
+        &self.data
+    }
+}
+
+/// Inputs of a set, their scaling, and the split it was fitted on.
 #[derive(Debug, Clone)]
 pub struct MeshData {
-    /// Features of every mesh (relative to the set's first mesh, the rest pose), normalised
-    /// with [`Self::normalization`]. The raw features are not kept: on large meshes they would
-    /// double this, the largest thing in memory besides the model.
-    pub normalized: FeatureSet,
+    /// Every mesh's input (features relative to the set's first mesh, the rest pose, or
+    /// positions), scaled with [`Self::normalization`]. The raw features are not kept: on large
+    /// meshes they would double this, the largest thing in memory besides the model.
+    pub normalized: Inputs,
     /// Fitted on the training meshes only, so the test meshes stay unseen.
-    pub normalization: Normalization,
+    pub normalization: InputScaling,
     pub split: Split,
     /// Warnings of the feature extraction (degenerate faces and the like).
     pub warnings: Vec<String>,
@@ -66,6 +113,26 @@ impl MeshData {
         ))
     }
 
+    /// The positions of every mesh of `set`, standardised per vertex and coordinate on
+    /// `split.train` (the position networks' input).
+    pub fn prepare_positions(set: &MeshSet, split: Split) -> Result<Self> {
+        split.check(set.len())?;
+        let scaling = PositionScaling::fit(set, &split.train)?;
+        Ok(Self::with_position_scaling(set, split, scaling))
+    }
+
+    /// The positions of `set` with a given scaling (a saved model's).
+    pub fn with_position_scaling(set: &MeshSet, split: Split, scaling: PositionScaling) -> Self {
+        let data: Vec<f32> = set.frames().flat_map(|f| scaling.apply(f)).collect();
+        Self {
+            normalized: Inputs::new(set.len(), set.vertex_count(), 3, data),
+            normalization: InputScaling::Positions(scaling),
+            split,
+            warnings: Vec::new(),
+            labels: None,
+        }
+    }
+
     /// As [`Self::prepare`] from features already computed.
     pub fn from_features(raw: FeatureSet, split: Split, warnings: Vec<String>) -> Result<Self> {
         split.check(raw.frames())?;
@@ -87,9 +154,10 @@ impl MeshData {
     ) -> Self {
         let normalized = normalization.apply(&raw);
         drop(raw);
+        let (frames, vertices) = (normalized.frames(), normalized.vertices());
         Self {
-            normalized,
-            normalization,
+            normalized: Inputs::new(frames, vertices, CHANNELS, normalized.into_vec()),
+            normalization: InputScaling::Features(normalization),
             split,
             warnings,
             labels: None,
@@ -141,9 +209,10 @@ impl MeshData {
         self.normalized.vertices()
     }
 
-    /// Normalised features of the meshes `indices` as an f32 tensor `[B, V, 9]`.
+    /// Scaled inputs of the meshes `indices` as an f32 tensor `[B, V, C]`.
     pub fn batch(&self, indices: &[usize], device: &Device) -> Result<Tensor> {
-        let per_mesh = self.vertex_count() * CHANNELS;
+        let channels = self.normalized.channels();
+        let per_mesh = self.vertex_count() * channels;
         let mut data = Vec::with_capacity(indices.len() * per_mesh);
         for &i in indices {
             if i >= self.len() {
@@ -156,7 +225,7 @@ impl MeshData {
         }
         Ok(Tensor::from_vec(
             data,
-            (indices.len(), self.vertex_count(), CHANNELS),
+            (indices.len(), self.vertex_count(), channels),
             device,
         )?)
     }
@@ -195,20 +264,25 @@ mod tests {
             .unwrap()
             .features;
         let data = MeshData::prepare(&set, split.clone(), FeatureOptions::default()).unwrap();
-        let train = data.normalized.subset(&split.train).unwrap();
-        let extreme = train.as_slice().iter().fold(0f32, |m, x| m.max(x.abs()));
+        let extreme = (split.train.iter())
+            .flat_map(|&i| data.normalized.frame(i))
+            .fold(0f32, |m, x| m.max(x.abs()));
         assert!(
             (extreme - 0.95).abs() < 1e-3,
             "train range reaches ±0.95: {extreme}"
         );
         let on_train = Normalization::fit([&raw.subset(&split.train).unwrap()]).unwrap();
         let on_test = Normalization::fit([&raw.subset(&split.test).unwrap()]).unwrap();
-        assert_eq!(data.normalization, on_train);
-        assert_ne!(data.normalization, on_test);
+        let fitted = |d: &MeshData| match &d.normalization {
+            InputScaling::Features(n) => *n,
+            InputScaling::Positions(_) => panic!("features expected"),
+        };
+        assert_eq!(fitted(&data), on_train);
+        assert_ne!(fitted(&data), on_test);
 
         let x = data.batch(&[1, 0], &Device::Cpu).unwrap();
         assert_eq!(x.dims(), &[2, set.vertex_count(), CHANNELS]);
-        let back = denormalize(&data.normalization, &x).unwrap();
+        let back = denormalize(&on_train, &x).unwrap();
         for (a, b) in back.frame(0).iter().zip(raw.frame(1)) {
             assert!((a - b).abs() < 1e-4, "{a} vs {b}");
         }
@@ -221,8 +295,8 @@ mod tests {
         };
         let all = MeshData::prepare_fitted(&set, split.clone(), FeatureOptions::default(), on_all)
             .unwrap();
-        assert_eq!(all.normalization, Normalization::fit([&raw]).unwrap());
-        assert_ne!(all.normalization, on_train);
+        assert_eq!(fitted(&all), Normalization::fit([&raw]).unwrap());
+        assert_ne!(fitted(&all), on_train);
         let extreme = all
             .normalized
             .as_slice()
@@ -238,7 +312,7 @@ mod tests {
             .unwrap();
         let train_raw = raw.subset(&split.train).unwrap();
         assert_eq!(
-            q.normalization,
+            fitted(&q),
             Normalization::fit_quantile([&train_raw], 0.01).unwrap()
         );
         let extreme = q
@@ -247,5 +321,15 @@ mod tests {
             .iter()
             .fold(0f32, |m, x| m.max(x.abs()));
         assert_eq!(extreme, 1.0);
+
+        // The position networks' input: 3 standardised coordinates per vertex.
+        let pos = MeshData::prepare_positions(&set, split.clone()).unwrap();
+        let x = pos.batch(&[2], &Device::Cpu).unwrap();
+        assert_eq!(x.dims(), &[1, set.vertex_count(), 3]);
+        let InputScaling::Positions(scaling) = &pos.normalization else {
+            panic!("positions expected");
+        };
+        let back = scaling.invert(pos.normalized.frame(2));
+        assert!((back[7][1] - f64::from(set.frame(2)[7][1])).abs() < 1e-5);
     }
 }

@@ -17,6 +17,11 @@
 //! code, which produced the published numbers; at their scale the paper's α is `--loss-weights
 //! 40,24,1` (80 × 0.3 = 24).
 //!
+//! ## The other networks
+//! The mesh VAE of Tan et al. (`Network::Tan2018`) takes this loss as ours. CoMA and SpiralNet++
+//! are plain auto-encoders with an L1 loss: the reconstruction term is the mean of |x − x̂|
+//! over every value, and there is no KL term (their weights: `TrainConfig::for_network`).
+//!
 //! ## Conditional models
 //! The `*_cond` variants take each mesh's one-hot label c (encoder and decoder both see it).
 //! The KL term stays against N(0, I): Sohn et al.'s simple variant with a prior that does not
@@ -25,6 +30,7 @@
 use crate::candle::batch_norm::Mode;
 use crate::candle::model::{Encoded, MeshVae};
 use crate::error::Result;
+use crate::net::network::RecLoss;
 use candle_core::{DType, Tensor};
 use serde::{Deserialize, Serialize};
 
@@ -73,12 +79,17 @@ fn scalar(t: &Tensor) -> Result<f64> {
     Ok(t.to_dtype(DType::F64)?.to_scalar::<f64>()?)
 }
 
-/// mean_b Σ_{v,c} (x − x̂)², a scalar tensor of x's dtype (summed in f64: an f32 sum over a
-/// batch's million values loses digits).
-fn mean_sse(x: &Tensor, x_hat: &Tensor) -> Result<Tensor> {
-    let batch = x.dim(0)? as f64;
-    let sum = (x - x_hat)?.sqr()?.to_dtype(DType::F64)?.sum_all()?;
-    Ok((sum / batch)?.to_dtype(x.dtype())?)
+/// The reconstruction term, a scalar tensor of x's dtype (summed in f64: an f32 sum over a
+/// batch's million values loses digits): mean_b Σ_{v,c} (x − x̂)² for ours and the mesh VAE,
+/// the mean of |x − x̂| over every value for CoMA and SpiralNet++.
+fn rec_term(x: &Tensor, x_hat: &Tensor, kind: RecLoss) -> Result<Tensor> {
+    let d = (x - x_hat)?;
+    let (sum, count) = match kind {
+        RecLoss::SumOfSquares => (d.sqr()?, x.dim(0)?),
+        RecLoss::MeanAbsolute => (d.abs()?, x.elem_count()),
+    };
+    let sum = sum.to_dtype(DType::F64)?.sum_all()?;
+    Ok((sum / count as f64)?.to_dtype(x.dtype())?)
 }
 
 /// mean_b ½ Σ_j (μ² + σ² − log(10⁻⁸ + σ²) − 1), a scalar tensor.
@@ -114,8 +125,12 @@ impl MeshVae {
         weights: &LossWeights,
     ) -> Result<(Tensor, Tensor)> {
         let (x_hat, encoded) = self.forward_cond(x, c, eps, Mode::Train)?;
-        let rec = (mean_sse(x, &x_hat)? * weights.rec)?;
-        let kl = (mean_kl(&encoded)? * weights.kl)?;
+        let rec = (rec_term(x, &x_hat, self.config().net.rec_loss())? * weights.rec)?;
+        // A plain auto-encoder has no posterior to compare with the prior.
+        let kl = match self.config().net.is_variational() {
+            true => (mean_kl(&encoded)? * weights.kl)?,
+            false => Tensor::zeros((), x.dtype(), x.device())?,
+        };
         Ok((rec, kl))
     }
 
@@ -188,6 +203,6 @@ impl MeshVae {
         weights: &LossWeights,
     ) -> Result<f64> {
         let x_hat = self.reconstruct_cond(x, c)?;
-        Ok(scalar(&mean_sse(x, &x_hat)?)? * weights.rec)
+        Ok(scalar(&rec_term(x, &x_hat, self.config().net.rec_loss())?)? * weights.rec)
     }
 }

@@ -44,6 +44,7 @@ mod loss_pass;
 mod phases;
 mod request;
 mod rollback;
+pub(crate) mod scaling;
 pub(crate) mod schedule;
 mod setup;
 pub(crate) mod split;

@@ -119,11 +119,18 @@ pub struct TrainSummary {
     pub executor: Option<Executor>,
 }
 
-/// The hierarchy settings a model configuration needs.
+/// The hierarchy settings a model configuration needs: `base` (the user's λmax and
+/// de-pooling) with the model's pooler and levels, and for the other networks their own ratio.
 pub fn hierarchy_config(model: &ModelConfig, base: HierarchyConfig) -> HierarchyConfig {
+    let own = model.hierarchy_config();
     HierarchyConfig {
-        pooler: model.pool,
-        levels: model.pool_levels(),
+        pooler: own.pooler,
+        levels: own.levels,
+        ratio: if model.net.is_ours() {
+            base.ratio
+        } else {
+            own.ratio
+        },
         ..base
     }
 }

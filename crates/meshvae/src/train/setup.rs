@@ -4,9 +4,11 @@
 use super::EpochRecord;
 use crate::error::{Result, VaeError};
 use crate::net::config::ModelConfig;
+use crate::net::network::Input;
 use crate::train::config::TrainConfig;
 use crate::train::data::{MeshData, NormalizationFit};
 use crate::train::folder::{FORMAT, ModelFolder, ModelSpec, SplitFile, VERSION};
+use crate::train::scaling::InputScaling;
 use crate::train::schedule::StopReason;
 use crate::train::split::Split;
 use mesh_hierarchy::{Hierarchy, HierarchyConfig};
@@ -45,6 +47,18 @@ pub(super) fn fresh_setup(
         split_file = split_file.with_shapes(&test_groups);
     }
     let labels = mesh_labels(&request.model, set, &split)?;
+    let net = request.model.net;
+    if set.vertex_count() < net.min_vertices() {
+        return Err(VaeError::argument(
+            "net",
+            format!(
+                "{net} samples the template down by 4 at each of its 4 levels, which needs at \
+                 least {} vertices; the set has {}",
+                net.min_vertices(),
+                set.vertex_count()
+            ),
+        ));
+    }
     prepare_out_dir(folder, force)?;
     let template = set.template();
     let hierarchy = Hierarchy::build(&template, &hierarchy_config)?;
@@ -52,7 +66,10 @@ pub(super) fn fresh_setup(
         on_all: train.normalize_on_all,
         quantile: train.normalize_quantile,
     };
-    let mut data = MeshData::prepare_fitted(set, split, request.features, fit)?;
+    let mut data = match request.model.net.input() {
+        Input::Features => MeshData::prepare_fitted(set, split, request.features, fit)?,
+        Input::Positions => MeshData::prepare_positions(set, split)?,
+    };
     if let Some(labels) = &labels {
         data = data.with_labels(labels.clone())?;
     }
@@ -210,13 +227,18 @@ pub(super) fn resume_setup(
         folder.write_json(&folder.config(), &spec)?;
     }
     let hierarchy = Hierarchy::load(&folder.hierarchy())?;
-    let normalization = folder.read_json(&folder.normalization())?;
+    let scaling: InputScaling = folder.read_json(&folder.normalization())?;
     let split_file: SplitFile = folder.read_json(&folder.split())?;
     let split = split_file.split();
     split.check(request.set.len())?;
-    let features = deform_features::extract_features(request.set, spec.features)?;
-    let mut data =
-        MeshData::with_normalization(features.features, split, normalization, features.warnings);
+    let mut data = match scaling {
+        InputScaling::Features(normalization) => {
+            let features = deform_features::extract_features(request.set, spec.features)?;
+            let (raw, warnings) = (features.features, features.warnings);
+            MeshData::with_normalization(raw, split, normalization, warnings)
+        }
+        InputScaling::Positions(p) => MeshData::with_position_scaling(request.set, split, p),
+    };
     if let Some(labels) = &spec.labels {
         data = data.with_labels(labels.clone())?;
     }

@@ -99,8 +99,11 @@ impl<'a> Trainer<'a> {
         let mut model = MeshVae::new(&spec.model, &hierarchy, device, spec.train.seed)?;
         let mut adam = Adam::with_config(model.trainable_vars(), spec.train.adam())?;
         if spec.train.head_lr_scale != 1.0 {
+            // A plain auto-encoder has no σ head.
             for name in crate::net::plan::HEAD_WEIGHTS {
-                adam.scale_lr(name, spec.train.head_lr_scale)?;
+                if adam.names().any(|n| n == name) {
+                    adam.scale_lr(name, spec.train.head_lr_scale)?;
+                }
             }
         }
         adam.set_grad_clip(spec.train.grad_clip)?;

@@ -23,6 +23,9 @@ pub(crate) fn create(
                 Init::Normal => rng.normals(n).into_iter().map(|x| x * init_std).collect(),
                 Init::Zeros => vec![0.0; n],
                 Init::Ones => vec![1.0; n],
+                Init::Uniform(bound) => (0..n)
+                    .map(|_| (2.0 * rng.uniform() - 1.0) * bound)
+                    .collect(),
             };
             let t = Tensor::from_vec(values, p.shape.as_slice(), device)?.to_dtype(dtype)?;
             Ok(Var::from_tensor(&t)?)

@@ -6,7 +6,7 @@ use super::{
 };
 use crate::candle::model::MeshVae;
 use crate::cpu::{Real, of};
-use crate::error::Result;
+use crate::error::{Result, VaeError};
 use crate::net::config::FEATURE_CHANNELS;
 use crate::net::plan::{ConvStep, ConvVars, PoolStep, Step};
 use candle_core::Var;
@@ -24,7 +24,9 @@ const FAR_WINDOW: usize = if cfg!(test) { 16 } else { 1024 };
 impl<T: Real> Net<T> {
     /// The network of `model` with buffers for batches of up to `max_batch`.
     pub fn build(model: &MeshVae, max_batch: usize) -> Result<Self> {
-        let plan = model.plan();
+        let plan = model.plan().ok_or_else(|| {
+            VaeError::argument("model", "the CPU engine runs the paper's network only")
+        })?;
         let (names, vars): (Vec<String>, Vec<Var>) = model.trainable_vars().into_iter().unzip();
         let state: Vec<Var> = model.state_vars().into_iter().map(|(_, v)| v).collect();
         let mut grads: Vec<Vec<T>> = vars.iter().map(|v| vec![of(0.0); v.elem_count()]).collect();
