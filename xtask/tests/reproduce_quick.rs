@@ -128,6 +128,8 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         "## Ordering of the columns",
         "## Seed by seed",
         "## Relative improvements of ours",
+        "## The paper's claims",
+        "## Against other auto-encoders",
         "## Network structures",
         "## Parameters",
         "## Hand-written notes",

@@ -7,6 +7,7 @@ use super::stats::Stat;
 use std::fmt::Write;
 
 mod ablation;
+mod claims;
 mod frameworks;
 mod header;
 mod improvements;
@@ -183,6 +184,7 @@ pub fn markdown(outcome: &Outcome, kept: Option<&str>) -> String {
     ordering::ordering(&mut md, outcome);
     seeds::seed_by_seed(&mut md, outcome);
     improvements::improvements(&mut md, outcome);
+    claims::claims(&mut md, outcome);
     structures::structures(&mut md, outcome);
     frameworks::frameworks(&mut md, outcome);
     parameters::parameters(&mut md, outcome);

@@ -415,3 +415,36 @@ fn the_papers_horse_figure_is_shown_in_our_copys_units() {
     assert!(row("| Gong et al. 2019").ends_with("| – |"));
     assert!(md.contains("scaled by 1.6768815 about the origin"), "{md}");
 }
+
+#[test]
+fn the_claims_are_counted_seed_by_seed_and_ours_is_ranked() {
+    // Ours below max pooling on seeds 1 and 2, above it on seed 3; below qem on every seed.
+    let mut results = Vec::new();
+    for (seed, ours, max) in [(1, 0.5, 0.6), (2, 0.5, 0.7), (3, 0.9, 0.8)] {
+        results.push(result(OURS, seed, ours));
+        results.push(result("max", seed, max));
+        results.push(result("qem", seed, 1.0));
+    }
+    let md = markdown(&outcome(results), None);
+    let section = &md[md
+        .find("## The paper's claims")
+        .unwrap_or_else(|| panic!("{md}"))..];
+    let row = |label: &str| {
+        (section.lines())
+            .find(|l| l.starts_with(&format!("| {label} |")))
+            .unwrap_or_else(|| panic!("{section}"))
+            .to_string()
+    };
+    // (0.6333 − 0.7) / 0.7 = −9.52 %.
+    let max = row("modified QEM, max pooling");
+    assert!(
+        max.ends_with("| — | not settled: 2 of 3, -9.52 % |"),
+        "{max}"
+    );
+    let qem = row("classical QEM, mean pooling");
+    assert!(qem.contains("| -9.17 % | **holds**: 3 of 3, "), "{qem}");
+    assert!(
+        section.contains("rank among the ablation columns on synthetic: 1 of 3 on seed 1, 1 of 3 on seed 2, 2 of 3 on seed 3."),
+        "{section}"
+    );
+}
