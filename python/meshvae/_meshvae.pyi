@@ -180,7 +180,9 @@ class FeatureFile:
 def load_features(path: _Path) -> FeatureFile: ...
 
 class Model:
-    """A model trained by `meshvae train`, in inference mode."""
+    """A model trained by `meshvae train`, in inference mode: ours, or another network
+    (`--net tan2018|coma|spiralnet`; `config["model"]["net"]`), whose posterior is the point mu
+    (sigma 0) for the plain auto-encoders CoMA and SpiralNet++."""
 
     @staticmethod
     def load(path: _Path) -> Model: ...

@@ -184,3 +184,22 @@ def test_every_safetensors_file_reads_with_the_safetensors_package(trained, tmp_
                 # The best epoch's state; its weights are weights.safetensors, not repeated.
                 assert not any(k.startswith("model.") for k in keys), keys
                 assert int(f.get_tensor("progress.epochs_done")[0]) == weights_epoch
+
+
+@pytest.mark.parametrize("net", ["coma", "spiralnet", "tan2018"])
+def test_other_networks_encode_and_decode_as_the_cli_reconstructs(cli, tmp_path, net):
+    """The networks `meshvae train --net` trains load and run as ours: a position network's
+    posterior is the point mu (sigma 0), and its decoder gives positions directly."""
+    mesh_set_dir, model_dir = train(cli, tmp_path, "--net", net)
+    mesh_set = meshvae.load_set(mesh_set_dir)
+    model = meshvae.Model.load(model_dir)
+    assert model.config["model"]["net"] == net
+    mu, sigma = model.encode(mesh_set.positions)
+    assert mu.shape == (len(mesh_set.names), LATENT)
+    if net == "tan2018":
+        assert (sigma > 0).all()
+    else:
+        assert (sigma == 0).all()
+    decoded = model.decode(mu)
+    want = cli_reconstructions(cli, model_dir, mesh_set.names, tmp_path / "r")
+    assert_same_meshes(aligned(decoded, mesh_set.positions), want)

@@ -208,7 +208,13 @@ pub fn recorded(run: &Run, records: &Path) -> Result<Recorded, ReproError> {
     if !path.is_file() {
         return Ok(Recorded::Missing);
     }
-    let record = read_record(&path)?;
+    let record = read_record(&path).map_err(|e| match e {
+        ReproError::Results { path, message } => ReproError::Results {
+            path,
+            message: format!("{message}; delete it to run again"),
+        },
+        other => other,
+    })?;
     let model = run.column.model().map_err(|e| ReproError::run(run, e))?;
     let differences = record.differences(run, &model, &RunSettings::of(run, &model));
     Ok(if differences.is_empty() {
@@ -226,7 +232,7 @@ pub fn read_record(path: &Path) -> Result<RunResult, ReproError> {
     let text = std::fs::read_to_string(path).map_err(|e| ReproError::io(path, e))?;
     serde_json::from_str(&text).map_err(|e| ReproError::Results {
         path: path.to_path_buf(),
-        message: format!("unreadable run result ({e}); delete it to run again"),
+        message: format!("unreadable run result ({e})"),
     })
 }
 
