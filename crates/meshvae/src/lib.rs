@@ -69,6 +69,7 @@ mod error;
 mod folder;
 mod net;
 mod numerics;
+mod optim;
 mod train;
 
 // Errors.
@@ -91,7 +92,7 @@ pub use candle::model::{Encoded, MeshVae};
 pub use cpu::{Engine, StepLoss};
 
 // Training (`train/`): the loop, its optimiser, losses, schedule, data, split and checkpoints.
-pub use train::adam::{Adam, AdamConfig, GradClip};
+pub use optim::adam::{Adam, AdamConfig, GradClip};
 pub use train::checkpoint::{Checkpoint, Progress};
 pub use train::config::{
     DEFAULT_BETA2, DEFAULT_GRAD_CLIP, DEFAULT_HEAD_LR_SCALE, DEFAULT_MAX_STEPS,

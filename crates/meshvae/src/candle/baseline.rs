@@ -190,7 +190,7 @@ impl BaselineNet {
         }
         let mu = self.mu.forward(&h)?;
         let sigma = match &self.sigma {
-            Some(s) => Some((candle_nn::ops::sigmoid(&s.forward(&h)?)? * 2.0)?.sqrt()?),
+            Some(s) => Some(crate::candle::model::sigma_head(&s.forward(&h)?)?),
             None => None,
         };
         Ok((mu, sigma))
@@ -250,9 +250,9 @@ mod tests {
     use super::*;
     use crate::candle::model::MeshVae;
     use crate::net::config::ModelConfig;
+    use crate::net::loss_weights::LossWeights;
     use crate::net::network::Network;
     use crate::numerics::rng::Rng;
-    use crate::train::loss::LossWeights;
     use candle_core::DType;
 
     fn random(shape: &[usize], seed: u64) -> Tensor {

@@ -26,10 +26,10 @@ pub struct BatchNorm {
 }
 
 impl BatchNorm {
-    /// ε added to the variance (the authors' 1e-5).
-    pub const EPS: f64 = 1e-5;
-    /// Decay of the running statistics (the authors' 0.9).
-    pub const DECAY: f64 = 0.9;
+    /// ε added to the variance (the authors' 1e-5; `net/batch_norm.rs`).
+    pub const EPS: f64 = crate::net::batch_norm::EPS;
+    /// Decay of the running statistics (the authors' 0.9; `net/batch_norm.rs`).
+    pub const DECAY: f64 = crate::net::batch_norm::DECAY;
 
     /// A layer on given variables, all of shape `[C]`: the trained γ and β, and the running mean
     /// and variance (state, not trained; initially 0 and 1).

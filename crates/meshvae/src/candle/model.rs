@@ -40,6 +40,12 @@ pub struct Encoded {
     pub sigma: Tensor,
 }
 
+/// σ = √(2·sigmoid(s)) ∈ (0, √2) of the σ head's pre-activation s (the authors' form, for every
+/// VAE here).
+pub(crate) fn sigma_head(s: &Tensor) -> Result<Tensor> {
+    Ok((candle_nn::ops::sigmoid(s)? * 2.0)?.sqrt()?)
+}
+
 /// The mesh VAE on one hierarchy: the paper's network, or one of the others it is compared with
 /// ([`crate::Network`]; `baseline.rs`).
 #[derive(Debug, Clone)]
@@ -298,8 +304,10 @@ impl MeshVae {
             mu = (mu + c.matmul(&w.mu)?)?;
             s = (s + c.matmul(&w.sigma)?)?;
         }
-        let sigma = (candle_nn::ops::sigmoid(&s)? * 2.0)?.sqrt()?;
-        Ok(Encoded { mu, sigma })
+        Ok(Encoded {
+            mu,
+            sigma: sigma_head(&s)?,
+        })
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` (unconditional models).

@@ -4,7 +4,7 @@
 //! results do not depend on the thread count.
 
 use super::{Real, f64_of, of};
-use crate::cpu::wide::wide;
+use crate::numerics::wide::wide;
 use rayon::prelude::*;
 
 /// Vertices per parallel chunk.

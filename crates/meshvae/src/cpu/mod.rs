@@ -33,12 +33,11 @@ mod kernels;
 mod net;
 #[cfg(test)]
 mod tests;
-pub(crate) mod wide;
 
 use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
-use crate::train::adam::Adam;
-use crate::train::loss::LossWeights;
+use crate::net::loss_weights::LossWeights;
+use crate::optim::adam::Adam;
 use candle_core::{DType, Tensor};
 use net::{Inputs, Net};
 

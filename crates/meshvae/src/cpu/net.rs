@@ -2,12 +2,12 @@
 
 use super::kernels as k;
 use super::{Real, StepLoss, f64_of, of};
-use crate::candle::batch_norm::BatchNorm;
 use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
+use crate::net::batch_norm as bn;
 use crate::net::config::FEATURE_CHANNELS;
-use crate::train::adam::{Adam, GradSource};
-use crate::train::loss::LossWeights;
+use crate::net::loss_weights::LossWeights;
+use crate::optim::adam::{Adam, GradSource};
 use candle_core::{Layout, Storage, Tensor, Var};
 use spectral_conv::{ChebKernel, MaxKernel, SparseKernel, Workspace};
 use std::sync::Arc;
@@ -404,7 +404,7 @@ impl<T: Real> Net<T> {
         Ok(())
     }
 
-    /// r ← 0.9·r + 0.1·batch for every batch norm (as `BatchNorm` in train mode).
+    /// r ← 0.9·r + 0.1·batch for every batch norm (as candle's batch norm in train mode).
     fn update_running_stats(&self) -> Result<()> {
         for node in self.enc.iter().chain(&self.dec) {
             let Node::Conv(Conv { bn: Some(bn), .. }) = node else {
@@ -418,7 +418,7 @@ impl<T: Real> Net<T> {
                 let next: Vec<f64> = old
                     .iter()
                     .zip(batch)
-                    .map(|(r, b)| BatchNorm::DECAY * r + (1.0 - BatchNorm::DECAY) * b)
+                    .map(|(r, b)| bn::DECAY * r + (1.0 - bn::DECAY) * b)
                     .collect();
                 let t = Tensor::from_vec(next, old.len(), running.device())?;
                 running.set(&t.to_dtype(running.dtype())?)?;

@@ -5,7 +5,10 @@
 //! ([`plan::NetPlan`]). Nothing here knows candle, the CPU engine or training.
 
 pub(crate) mod baseline;
+pub(crate) mod batch_norm;
 pub(crate) mod config;
+pub(crate) mod latent;
+pub(crate) mod loss_weights;
 pub(crate) mod network;
 pub(crate) mod params;
 pub(crate) mod plan;

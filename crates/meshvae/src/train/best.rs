@@ -15,7 +15,7 @@
 
 use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
-use crate::train::adam::Adam;
+use crate::optim::adam::Adam;
 use crate::train::checkpoint::{Checkpoint, Progress};
 use crate::train::folder::ModelFolder;
 use candle_core::{Tensor, Var};

@@ -19,7 +19,7 @@
 use crate::candle::model::{MeshVae, stamped_error, tensor_entry};
 use crate::error::{Result, VaeError};
 use crate::net::config::ModelConfig;
-use crate::train::adam::Adam;
+use crate::optim::adam::Adam;
 use crate::train::schedule::ScheduleState;
 use candle_core::{DType, Device, Tensor};
 use mesh_io::stamped::{Stamp, format_of, read_stamped, write_stamped};

@@ -3,7 +3,7 @@
 
 use crate::error::{Result, VaeError};
 use crate::net::network::{Network, RecLoss};
-use crate::train::adam::AdamConfig;
+use crate::optim::adam::AdamConfig;
 use crate::train::loss::LossWeights;
 use crate::train::schedule::Schedule;
 use serde::{Deserialize, Serialize};

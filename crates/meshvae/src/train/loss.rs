@@ -30,31 +30,10 @@
 use crate::candle::batch_norm::Mode;
 use crate::candle::model::{Encoded, MeshVae};
 use crate::error::Result;
+use crate::net::latent::KL_VAR_EPS;
+pub use crate::net::loss_weights::LossWeights;
 use crate::net::network::RecLoss;
 use candle_core::{DType, Tensor};
-use serde::{Deserialize, Serialize};
-
-/// Weights of the three loss terms.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct LossWeights {
-    /// Reconstruction (batch mean of the per-shape sum of squared errors).
-    pub rec: f64,
-    /// KL divergence to N(0, I).
-    pub kl: f64,
-    /// ½‖w‖² over every trainable variable.
-    pub l2: f64,
-}
-
-impl Default for LossWeights {
-    /// The authors' 40 / 3 / 1.
-    fn default() -> Self {
-        Self {
-            rec: 40.0,
-            kl: 3.0,
-            l2: 1.0,
-        }
-    }
-}
 
 /// One evaluation of the loss.
 #[derive(Debug, Clone)]
@@ -96,7 +75,7 @@ fn rec_term(x: &Tensor, x_hat: &Tensor, kind: RecLoss) -> Result<Tensor> {
 fn mean_kl(e: &Encoded) -> Result<Tensor> {
     let batch = e.mu.dim(0)? as f64;
     let var = e.sigma.sqr()?;
-    let terms = ((e.mu.sqr()? + &var)? - (var + 1e-8)?.log()?)?;
+    let terms = ((e.mu.sqr()? + &var)? - (var + KL_VAR_EPS)?.log()?)?;
     Ok((((terms - 1.0)?.sum_all()? * 0.5)? / batch)?)
 }
 

@@ -30,7 +30,6 @@
 use crate::error::Result;
 use trainer::Trainer;
 
-pub(crate) mod adam;
 mod bar;
 mod best;
 pub(crate) mod checkpoint;

@@ -6,7 +6,7 @@
 
 use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
-use crate::train::adam::Adam;
+use crate::optim::adam::Adam;
 use crate::train::checkpoint::Progress;
 use crate::train::schedule::Schedule;
 use candle_core::{CpuStorage, DType, Storage, Tensor};

@@ -22,7 +22,7 @@ use crate::candle::model::MeshVae;
 use crate::cpu::Engine;
 use crate::error::Result;
 use crate::numerics::rng::Rng;
-use crate::train::adam::Adam;
+use crate::optim::adam::Adam;
 use crate::train::data::MeshData;
 use candle_core::{DType, Tensor};
 use indicatif::ProgressBar;

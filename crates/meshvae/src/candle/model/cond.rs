@@ -102,8 +102,8 @@ mod tests {
     use super::super::MeshVae;
     use crate::candle::batch_norm::Mode;
     use crate::net::config::ModelConfig;
+    use crate::net::loss_weights::LossWeights;
     use crate::numerics::rng::Rng;
-    use crate::train::loss::LossWeights;
     use candle_core::{DType, Device, Tensor};
     use mesh_hierarchy::Hierarchy;
 

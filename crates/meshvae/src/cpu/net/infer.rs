@@ -10,7 +10,7 @@ use crate::cpu::kernels as k;
 use crate::cpu::{Real, f64_of};
 use crate::error::{Result, VaeError};
 use crate::net::config::FEATURE_CHANNELS;
-use crate::train::loss::LossWeights;
+use crate::net::loss_weights::LossWeights;
 use candle_core::Tensor;
 
 impl<T: Real> Net<T> {

@@ -7,7 +7,8 @@ use super::Net;
 use crate::cpu::gemm::{Mat, matmul, matmul_serial};
 use crate::cpu::kernels as k;
 use crate::cpu::{Real, f64_of, of};
-use crate::train::loss::LossWeights;
+use crate::net::latent::{kl_unit, kl_unit_dsigma};
+use crate::net::loss_weights::LossWeights;
 
 /// Which dense heads [`Net::heads_forward`] evaluates.
 #[derive(Clone, Copy, PartialEq)]
@@ -84,7 +85,7 @@ impl<T: Real> Net<T> {
             lat.z[i] = mu + sigma * lat.eps[i];
             let (m, sg) = (f64_of(mu), f64_of(sigma));
             let var = sg * sg;
-            kl += m * m + var - (var + 1e-8).ln() - 1.0;
+            kl += kl_unit(m, var);
         }
         0.5 * kl / batch as f64
     }
@@ -137,7 +138,7 @@ impl<T: Real> Net<T> {
             let (mu, sigma, sig) = (f64_of(lat.mu[i]), f64_of(lat.sigma[i]), f64_of(lat.sig[i]));
             let dz = f64_of(lat.dz[i]);
             let dmu = dz + c * mu;
-            let dsigma = dz * f64_of(lat.eps[i]) + c * (sigma - sigma / (sigma * sigma + 1e-8));
+            let dsigma = dz * f64_of(lat.eps[i]) + c * kl_unit_dsigma(sigma);
             lat.dmu[i] = of(dmu);
             lat.ds[i] = of(dsigma / sigma * sig * (1.0 - sig));
         }

@@ -2,10 +2,10 @@
 //! its batch norm and tanh, or a pooling / de-pooling operator.
 
 use super::{Acts, Node, PoolOp};
-use crate::candle::batch_norm::BatchNorm;
 use crate::cpu::kernels as k;
 use crate::cpu::{Real, of};
 use crate::error::Result;
+use crate::net::batch_norm as bn;
 use spectral_conv::ConvDims;
 
 /// Which statistics a batch norm normalises with: the batch's own (training; they are kept for
@@ -45,10 +45,7 @@ pub(super) fn forward_node<T: Real>(
             acts.put(c.terms, terms);
             if let (Some(bn), BnStats::Running) = (&c.bn, stats) {
                 let (mean, var) = bn.running_stats()?;
-                let inv_std: Vec<f64> = var
-                    .iter()
-                    .map(|v| 1.0 / (v + BatchNorm::EPS).sqrt())
-                    .collect();
+                let inv_std: Vec<f64> = var.iter().map(|v| 1.0 / (v + bn::EPS).sqrt()).collect();
                 let out = &mut acts.0[c.out][..ny];
                 let params = (w[bn.gamma], w[bn.beta]);
                 k::bn_forward(
@@ -61,10 +58,7 @@ pub(super) fn forward_node<T: Real>(
                 );
             } else if let Some(bn) = &mut c.bn {
                 let (mean, var) = k::moments(&pre[..ny], (c.co, batch));
-                bn.inv_std = var
-                    .iter()
-                    .map(|v| 1.0 / (v + BatchNorm::EPS).sqrt())
-                    .collect();
+                bn.inv_std = var.iter().map(|v| 1.0 / (v + bn::EPS).sqrt()).collect();
                 bn.mean = mean;
                 bn.var = var;
                 let out = &mut acts.0[c.out][..ny];

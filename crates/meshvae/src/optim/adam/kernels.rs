@@ -82,7 +82,7 @@ impl FusedUpdate {
         let chunk = |t: &mut [T], m: &mut [T], v: &mut [T], g: &[T]| {
             // 8 floats per instruction instead of 4; the same operations, so the same bits
             // (vector division and square root are exact).
-            crate::cpu::wide::wide(
+            crate::numerics::wide::wide(
                 #[inline(always)]
                 || {
                     let sq = square_sum(t);
