@@ -368,7 +368,7 @@ fn candle_ablation(group: &mut Group<'_>, ablation: &Ablation, x: &Var, x_vm: &V
     let (graph, remeshed) = (&ablation.graph, &ablation.remesh);
     let v = graph.fine_count();
     let (m, mr) = (graph.coarse_count(), remeshed.coarse_count());
-    let max = MaxPool::with_mode(&graph.pool, MaxMode::Plain, &dev).expect("graph pool");
+    let max = MaxPool::with_mode(&graph.pool, MaxMode::PlainMax, &dev).expect("graph pool");
     let up = DePool::new(&graph.depool, &dev).expect("graph de-pool");
     let mean = MeanPool::new(&remeshed.pool, &dev).expect("remesh pool");
     let coarse_vm = Var::from_tensor(&random((m, BATCH, CHANNELS), 5)).expect("var");
@@ -405,7 +405,7 @@ fn buffer_level_ablation(group: &mut Group<'_>, ablation: &Ablation, xv: &[f32])
     let n = CHANNELS * BATCH;
     let graph = &ablation.graph;
     let (v, m) = (graph.fine_count(), graph.coarse_count());
-    let max = MaxPool::with_mode(&graph.pool, MaxMode::Plain, &dev).expect("graph pool");
+    let max = MaxPool::with_mode(&graph.pool, MaxMode::PlainMax, &dev).expect("graph pool");
     let up = SparseKernel::new(DePool::new(&graph.depool, &dev).expect("de-pool").op());
     let (mut y, mut arg, mut dx) = (vec![0.0f32; m * n], vec![0u32; m * n], vec![0.0f32; v * n]);
     group.bench_function("graph pool fwd+bwd, buffer-level", |b| {

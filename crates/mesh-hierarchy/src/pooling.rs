@@ -94,7 +94,7 @@ impl Pooler {
             // Remeshing only changes the coarse level: its operators are mean pooling's.
             Self::Mean | Self::Qem | Self::Remesh => PoolMode::Mean,
             Self::Max => PoolMode::SignedMax,
-            Self::Graph => PoolMode::Max,
+            Self::Graph => PoolMode::PlainMax,
             Self::Sampling => PoolMode::Sampling,
             Self::None => PoolMode::Identity,
         }
@@ -112,7 +112,7 @@ pub enum PoolMode {
     SignedMax,
     /// Per row of `pool` (a neighbourhood), the largest value (ties: the lowest fine index):
     /// graph pooling.
-    Max,
+    PlainMax,
     /// `coarse = pool · fine` keeps the survivors; de-pooling up-samples barycentrically.
     Sampling,
     /// Both operators are the identity (no pooling): nothing to compute.
@@ -285,7 +285,7 @@ impl PoolingOp {
     pub fn pool(&self, fine: &[f64], channels: usize) -> Result<Vec<f64>, HierarchyError> {
         check_len("fine", fine, self.fine_count(), channels)?;
         Ok(match self.mode() {
-            PoolMode::SignedMax | PoolMode::Max => self.select(fine, channels).0,
+            PoolMode::SignedMax | PoolMode::PlainMax => self.select(fine, channels).0,
             _ => apply(&self.pool, fine, channels),
         })
     }
@@ -303,7 +303,7 @@ impl PoolingOp {
         check_len("fine", fine, self.fine_count(), channels)?;
         check_len("upstream", upstream, self.coarse_count(), channels)?;
         Ok(match self.mode() {
-            PoolMode::SignedMax | PoolMode::Max => {
+            PoolMode::SignedMax | PoolMode::PlainMax => {
                 let (_, picked) = self.select(fine, channels);
                 let mut grad = vec![0.0; fine.len()];
                 for (i, (&u, &g)) in picked.iter().zip(upstream).enumerate() {

@@ -66,7 +66,7 @@ mod apps;
 mod candle;
 mod cpu;
 mod error;
-mod folder;
+mod trained;
 mod net;
 mod numerics;
 mod optim;
@@ -110,8 +110,8 @@ pub use train::{
     train, validation_loss,
 };
 
-// A trained model folder loaded for use (`folder.rs`).
-pub use folder::TrainedModel;
+// A trained model folder loaded for use (`trained.rs`).
+pub use trained::TrainedModel;
 
 // Applications of a trained model (`apps/`).
 pub use apps::embed::{

@@ -279,7 +279,7 @@ fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
     assert!((lhs - rhs).abs() < 1e-10 * lhs.abs().max(1.0));
 
     // The kernel built from the matrix alone (no device) selects and scatters the same.
-    let kernel = MaxKernel::from_matrix(&m, MaxMode::SignedMagnitude).unwrap();
+    let kernel = MaxKernel::from_matrix(&m, MaxMode::SignedMax).unwrap();
     let (mut ky, mut karg) = (vec![0.0; 30 * n], vec![0u32; 30 * n]);
     kernel.forward_into(&x, &mut ky, &mut karg, n).unwrap();
     assert_eq!((ky, karg), (py, arg.clone()));
@@ -287,7 +287,7 @@ fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
     kernel.backward_into(&arg, &g, &mut kdx, n).unwrap();
     assert_eq!(kdx, dx);
     let empty = CsrMatrix::from_triplets(3, 0, &[]).unwrap();
-    let err = MaxKernel::from_matrix(&empty, MaxMode::Plain).unwrap_err();
+    let err = MaxKernel::from_matrix(&empty, MaxMode::PlainMax).unwrap_err();
     assert!(err.to_string().contains("0 fine vertices"), "{err}");
 }
 
@@ -295,7 +295,7 @@ fn sparse_and_max_pool_kernels_match_dense_and_their_adjoints() {
 fn graph_max_pool_buffers_match_the_candle_op_and_its_gradient() {
     // Overlapping member lists: each coarse vertex takes a random ~10% of 70 fine ones.
     let m = random_matrix(30, 70, 0.1, 11);
-    let pool = MaxPool::with_mode(&m, crate::MaxMode::Plain, &Device::Cpu).unwrap();
+    let pool = MaxPool::with_mode(&m, crate::MaxMode::PlainMax, &Device::Cpu).unwrap();
     let n = 6;
     let x = random_vec(70 * n, 12);
     let g = random_vec(30 * n, 13);
@@ -341,7 +341,7 @@ fn max_pool_blocks_match_a_plain_loop_and_unpool_is_the_same_on_any_thread_count
     let n = 40;
     let x = random_vec(120 * n, 15);
     let g = random_vec(50 * n, 16);
-    for mode in [crate::MaxMode::Plain, crate::MaxMode::SignedMagnitude] {
+    for mode in [crate::MaxMode::PlainMax, crate::MaxMode::SignedMax] {
         let pool = MaxPool::with_mode(&m, mode, &Device::Cpu).unwrap();
         let (mut y, mut arg) = (vec![0.0; 50 * n], vec![0u32; 50 * n]);
         pool.kernel().forward_into(&x, &mut y, &mut arg, n).unwrap();
@@ -351,8 +351,8 @@ fn max_pool_blocks_match_a_plain_loop_and_unpool_is_the_same_on_any_thread_count
                 for &j in m.row(r).0 {
                     let v = x[j as usize * n + k];
                     let better = match mode {
-                        crate::MaxMode::Plain => v > best,
-                        crate::MaxMode::SignedMagnitude => {
+                        crate::MaxMode::PlainMax => v > best,
+                        crate::MaxMode::SignedMax => {
                             v.abs() > best.abs() || (v.abs() == best.abs() && v < best)
                         }
                     };
@@ -407,7 +407,7 @@ fn graph_pool_timing_probe() {
     let m = members.rows();
     let n = 288;
     let x: Vec<f32> = random_vec(v * n, 1).iter().map(|&a| a as f32).collect();
-    let pool = MaxPool::with_mode(&members, crate::MaxMode::Plain, &Device::Cpu).unwrap();
+    let pool = MaxPool::with_mode(&members, crate::MaxMode::PlainMax, &Device::Cpu).unwrap();
     let signed = MaxPool::new(&members, &Device::Cpu).unwrap();
     let (mut y, mut arg, mut dx) = (vec![0f32; m * n], vec![0u32; m * n], vec![0f32; v * n]);
     // The fastest of 10 calls: the machine is shared.

@@ -7,7 +7,7 @@
 //! **Out:** differentiable layers: [`SparseOp`] (y = A x), [`ChebConv`]
 //! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`MeanPool`],
 //! [`DePool`], [`Sampling`] and [`MaxPool`] (signed largest magnitude per cluster, or with
-//! [`MaxMode::Plain`] graph max pooling over overlapping neighbourhoods).
+//! [`MaxMode::PlainMax`] graph max pooling over overlapping neighbourhoods).
 //!
 //! Training time is spent in these sparse products, and candle has no sparse tensors, so on the
 //! CPU they are custom ops with hand-written rayon kernels ([`Backend::Kernel`]; ChebConv is one

@@ -11,9 +11,9 @@ pub enum MaxMode {
     /// The member of largest magnitude, sign kept (the authors' max pooling). Ties in magnitude
     /// go to the negative value, then to the lowest vertex index.
     #[default]
-    SignedMagnitude,
+    SignedMax,
     /// The largest value (KCNet's graph max pooling). Ties go to the lowest vertex index.
-    Plain,
+    PlainMax,
 }
 
 /// Max pooling over member lists: for every (b, p, ch), the member j of row p of `pattern`
@@ -28,8 +28,8 @@ pub(crate) fn max_pool<T: Real>(
     mode: MaxMode,
 ) {
     match mode {
-        MaxMode::SignedMagnitude => max_pool_with::<T, true>(pattern, x, out, arg, c),
-        MaxMode::Plain => max_pool_with::<T, false>(pattern, x, out, arg, c),
+        MaxMode::SignedMax => max_pool_with::<T, true>(pattern, x, out, arg, c),
+        MaxMode::PlainMax => max_pool_with::<T, false>(pattern, x, out, arg, c),
     }
 }
 
@@ -254,7 +254,7 @@ mod tests {
         let x = [1.0, -2.0, -3.0, 2.0, 0.5, 4.0, -0.5, -4.0, 0.25, 1.0f64];
         let mut out = [9.0; 6];
         let mut arg = [7u32; 6];
-        max_pool(&pat, &x, &mut out, &mut arg, 2, MaxMode::SignedMagnitude);
+        max_pool(&pat, &x, &mut out, &mut arg, 2, MaxMode::SignedMax);
         // Ties in magnitude (-2 vs 2, 0.5 vs -0.5, 4 vs -4) go to the negative value.
         assert_eq!(out, [-3.0, -2.0, -0.5, -4.0, 0.0, 0.0]);
         assert_eq!(arg, [1, 0, 3, 3, u32::MAX, u32::MAX]);
@@ -284,7 +284,7 @@ mod tests {
         // tie between vertices 1 and 2 that goes to 1.
         let x = [1.0, 4.0, -2.0, -5.0, -3.0, -3.0f32];
         let (mut out, mut arg) = ([0.0f32; 4], [0u32; 4]);
-        max_pool(&pat, &x, &mut out, &mut arg, 1, MaxMode::Plain);
+        max_pool(&pat, &x, &mut out, &mut arg, 1, MaxMode::PlainMax);
         assert_eq!(out, [4.0, 4.0, -3.0, -3.0]);
         assert_eq!(arg, [1, 1, 1, 1]);
         let mut dx = [7.0f32; 6];

@@ -4,7 +4,7 @@
 //!   (divide by cluster size) or a copy matrix.
 //! - [`Sampling`]: CoMA down- or up-sampling matrices.
 //! - [`MaxPool`]: per channel, the member of each cluster with the largest magnitude, sign kept
-//!   (as the authors' max pooling), or ([`MaxMode::Plain`]) the largest value over overlapping
+//!   (as the authors' max pooling), or ([`MaxMode::PlainMax`]) the largest value over overlapping
 //!   neighbourhoods (graph max pooling, Shen et al. 2018); the gradient goes to the selected
 //!   member only, summed where one member is selected several times.
 //!
@@ -83,8 +83,8 @@ sparse_layer!(
 /// Max pooling over the member lists given by a pooling matrix's rows (its sparsity pattern;
 /// values are ignored; rows may overlap). An empty row yields 0.
 ///
-/// [`MaxMode::SignedMagnitude`] ([`MaxPool::new`]): the member of largest magnitude, sign
-/// kept; ties go to the negative value, then the lowest vertex index. [`MaxMode::Plain`]
+/// [`MaxMode::SignedMax`] ([`MaxPool::new`]): the member of largest magnitude, sign
+/// kept; ties go to the negative value, then the lowest vertex index. [`MaxMode::PlainMax`]
 /// ([`MaxPool::with_mode`]; graph pooling): the largest value; ties go to the lowest vertex
 /// index. On the fallback path, in signed-magnitude mode, an exact tie between equal values
 /// may give the gradient to another of the tied members (the output is the same); in plain
@@ -107,7 +107,7 @@ impl MaxPool {
     /// Signed max-magnitude pooling over the rows of `pooling` (coarse × fine), for inputs on
     /// `device`.
     pub fn new(pooling: &CsrMatrix, device: &Device) -> Result<Self> {
-        Self::with_mode(pooling, MaxMode::SignedMagnitude, device)
+        Self::with_mode(pooling, MaxMode::SignedMax, device)
     }
 
     /// Max pooling of the given mode over the rows of `pooling` (coarse × fine; for graph
@@ -255,8 +255,8 @@ impl MaxPool {
             .reshape((batch, rows, self.width, c))?;
         let imax = grouped.argmax_keepdim(2)?;
         let pick = match self.mode() {
-            MaxMode::Plain => imax,
-            MaxMode::SignedMagnitude => {
+            MaxMode::PlainMax => imax,
+            MaxMode::SignedMax => {
                 let imin = grouped.argmin_keepdim(2)?;
                 let (vmax, vmin) = (grouped.gather(&imax, 2)?, grouped.gather(&imin, 2)?);
                 let take_min = vmin.abs()?.ge(&vmax.abs()?)?;
@@ -493,8 +493,8 @@ mod tests {
     fn graph_max_pool_takes_the_plain_max_over_overlapping_rows_with_gradients() {
         let members = grid_membership();
         assert!(members.nnz() > 36, "the neighbourhoods overlap");
-        let pool = MaxPool::with_mode(&members, MaxMode::Plain, &Device::Cpu).unwrap();
-        assert_eq!(pool.mode(), MaxMode::Plain);
+        let pool = MaxPool::with_mode(&members, MaxMode::PlainMax, &Device::Cpu).unwrap();
+        assert_eq!(pool.mode(), MaxMode::PlainMax);
         let x = Var::from_tensor(&tensor(random_vec(2 * 36 * 3, 90), &[2, 36, 3])).unwrap();
         let xv = to_vec(&x);
         let kernel = pool.forward(x.as_tensor()).unwrap();

@@ -279,7 +279,7 @@ fn sparse_layers_and_pools_vertex_major_match_batch_major() {
             |x: &Tensor| max.forward_vertex_major(x),
         );
         check_layer("max pool", f, g, (3, 10, 4));
-        let graph = MaxPool::with_mode(&p, crate::MaxMode::Plain, &dev)
+        let graph = MaxPool::with_mode(&p, crate::MaxMode::PlainMax, &dev)
             .unwrap()
             .with_backend(backend);
         let (f, g) = (

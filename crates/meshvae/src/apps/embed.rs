@@ -5,7 +5,7 @@
 //! [`loop_measure`] quantifies whether a sequence (e.g. one gait cycle) traces a closed loop.
 
 use crate::error::{Result, VaeError};
-use crate::folder::TrainedModel;
+use crate::trained::TrainedModel;
 use crate::numerics::pca::{centered_gram, distances_from_gram, pca_of_gram};
 use crate::numerics::tsne::{TsneOptions, tsne};
 use mesh_io::MeshSet;

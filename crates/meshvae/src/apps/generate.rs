@@ -7,7 +7,7 @@
 //! label, whether the sample looks like the meshes of that label ([`Generated::label_share`]).
 
 use crate::error::{Result, VaeError};
-use crate::folder::TrainedModel;
+use crate::trained::TrainedModel;
 use crate::numerics::rng::Rng;
 use candle_core::Tensor;
 use deform_features::Reconstructor;

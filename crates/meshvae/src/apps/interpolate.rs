@@ -3,7 +3,7 @@
 //! inference mode.
 
 use crate::error::{Result, VaeError};
-use crate::folder::TrainedModel;
+use crate::trained::TrainedModel;
 use crate::train::split::resolve_mesh;
 use mesh_io::MeshSet;
 

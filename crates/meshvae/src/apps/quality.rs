@@ -6,7 +6,7 @@
 use crate::apps::eval::{error_report, mean_shape};
 use crate::apps::reconstruct::EvalReport;
 use crate::error::Result;
-use crate::folder::TrainedModel;
+use crate::trained::TrainedModel;
 use crate::train::RunStatus;
 use crate::train::schedule::StopReason;
 use candle_core::Device;

@@ -4,7 +4,7 @@
 
 use crate::apps::eval::{ErrorReport, error_report, mean_shape};
 use crate::error::{Result, VaeError};
-use crate::folder::TrainedModel;
+use crate::trained::TrainedModel;
 use crate::net::params::ParamCount;
 use crate::train::data::denormalize;
 use crate::train::scaling::InputScaling;

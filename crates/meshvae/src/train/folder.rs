@@ -1,6 +1,6 @@
 //! The model folder a training run writes: its files' paths ([`ModelFolder`]), `config.json`
 //! ([`ModelSpec`]) and `split.json` ([`SplitFile`]); everything needed to use a trained model
-//! without the training run (loaded by [`crate::TrainedModel`], `folder.rs`).
+//! without the training run (loaded by [`crate::TrainedModel`], `trained.rs`).
 //!
 //! ```text
 //! MODEL/

@@ -111,7 +111,7 @@ fn down(step: &PoolStep, device: &Device, ws: &Arc<Workspace>) -> Result<Down> {
         PoolMode::Mean => Down::Mean(MeanPool::new(m, device)?.with_workspace(ws.clone())),
         PoolMode::SignedMax => Down::Max(MaxPool::new(m, device)?),
         // The plain max over each neighbourhood (the pooling matrix's rows).
-        PoolMode::Max => Down::Max(MaxPool::with_mode(m, MaxMode::Plain, device)?),
+        PoolMode::PlainMax => Down::Max(MaxPool::with_mode(m, MaxMode::PlainMax, device)?),
         PoolMode::Sampling => Down::Sampling(Sampling::new(m, device)?.with_workspace(ws.clone())),
         PoolMode::Identity => Down::Identity,
     })
@@ -123,7 +123,7 @@ fn up(step: &PoolStep, device: &Device, ws: &Arc<Workspace>) -> Result<Up> {
     let m = &step.matrix;
     let ws = ws.clone();
     Ok(match step.mode {
-        PoolMode::Mean | PoolMode::SignedMax | PoolMode::Max => {
+        PoolMode::Mean | PoolMode::SignedMax | PoolMode::PlainMax => {
             Up::DePool(DePool::new(m, device)?.with_workspace(ws))
         }
         PoolMode::Sampling => Up::Sampling(Sampling::new(m, device)?.with_workspace(ws)),

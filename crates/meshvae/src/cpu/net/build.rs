@@ -160,8 +160,8 @@ impl<T: Real> Net<T> {
             let op = match (step.mode, step.is_depool()) {
                 (PoolMode::Identity, _) => PoolOp::Identity,
                 (_, true) | (PoolMode::Mean | PoolMode::Sampling, false) => sparse()?,
-                (PoolMode::SignedMax, false) => max(MaxMode::SignedMagnitude)?,
-                (PoolMode::Max, false) => max(MaxMode::Plain)?,
+                (PoolMode::SignedMax, false) => max(MaxMode::SignedMax)?,
+                (PoolMode::PlainMax, false) => max(MaxMode::PlainMax)?,
             };
             let out = match op {
                 PoolOp::Identity => input,
