@@ -66,11 +66,11 @@ mod apps;
 mod candle;
 mod cpu;
 mod error;
-mod trained;
 mod net;
 mod numerics;
 mod optim;
 mod train;
+mod trained;
 
 // Errors.
 pub use error::{Result, VaeError};

@@ -5,9 +5,9 @@
 //! [`loop_measure`] quantifies whether a sequence (e.g. one gait cycle) traces a closed loop.
 
 use crate::error::{Result, VaeError};
-use crate::trained::TrainedModel;
 use crate::numerics::pca::{centered_gram, distances_from_gram, pca_of_gram};
 use crate::numerics::tsne::{TsneOptions, tsne};
+use crate::trained::TrainedModel;
 use mesh_io::MeshSet;
 
 /// Settings of [`embed`].

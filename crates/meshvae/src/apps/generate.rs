@@ -7,8 +7,8 @@
 //! label, whether the sample looks like the meshes of that label ([`Generated::label_share`]).
 
 use crate::error::{Result, VaeError};
-use crate::trained::TrainedModel;
 use crate::numerics::rng::Rng;
+use crate::trained::TrainedModel;
 use candle_core::Tensor;
 use deform_features::Reconstructor;
 use mesh_io::{MeshSet, Point};

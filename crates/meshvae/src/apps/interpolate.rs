@@ -3,8 +3,8 @@
 //! inference mode.
 
 use crate::error::{Result, VaeError};
-use crate::trained::TrainedModel;
 use crate::train::split::resolve_mesh;
+use crate::trained::TrainedModel;
 use mesh_io::MeshSet;
 
 /// An interpolation sequence between two meshes of a set.

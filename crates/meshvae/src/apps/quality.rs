@@ -6,9 +6,9 @@
 use crate::apps::eval::{error_report, mean_shape};
 use crate::apps::reconstruct::EvalReport;
 use crate::error::Result;
-use crate::trained::TrainedModel;
 use crate::train::RunStatus;
 use crate::train::schedule::StopReason;
+use crate::trained::TrainedModel;
 use candle_core::Device;
 use mesh_io::{MeshSet, Point};
 use std::fmt;

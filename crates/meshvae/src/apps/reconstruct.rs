@@ -4,10 +4,10 @@
 
 use crate::apps::eval::{ErrorReport, error_report, mean_shape};
 use crate::error::{Result, VaeError};
-use crate::trained::TrainedModel;
 use crate::net::params::ParamCount;
 use crate::train::data::denormalize;
 use crate::train::scaling::InputScaling;
+use crate::trained::TrainedModel;
 use candle_core::{Device, Tensor};
 use deform_features::{CHANNELS, FeatureExtractor, FeatureSet, Reconstructor, RestMesh};
 use mesh_io::{MeshSet, Point, ShapeGroups};
