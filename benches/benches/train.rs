@@ -50,7 +50,7 @@ fn step(c: &mut Criterion) {
                     .normal_tensor((BATCH, config.latent), &device)
                     .expect("eps");
                 engine
-                    .forward_backward(&model, &x, &eps, &weights)
+                    .forward_backward(&model, &x, None, &eps, &weights)
                     .expect("step");
                 engine.apply_adam(&mut adam, weights.l2).expect("adam");
             })
@@ -62,7 +62,7 @@ fn step(c: &mut Criterion) {
                     .normal_tensor((BATCH, config.latent), &device)
                     .expect("eps");
                 // As `meshvae::train` does without the engine: Adam applies the L2 gradient.
-                let loss = model.training_loss(&x, &eps, &weights).expect("loss");
+                let loss = model.training_loss(&x, None, &eps, &weights).expect("loss");
                 let grads = model.backward(&loss.total).expect("backward");
                 adam.step_with_l2(&grads, weights.l2).expect("adam");
             })

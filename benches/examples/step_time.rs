@@ -89,7 +89,7 @@ fn run() -> Result<String, String> {
             .map_err(|e| e.to_string())?;
         let start = Instant::now();
         engine
-            .forward_backward(&model, &x, &eps, &weights)
+            .forward_backward(&model, &x, None, &eps, &weights)
             .map_err(|e| e.to_string())?;
         let mid = Instant::now();
         engine
@@ -97,7 +97,7 @@ fn run() -> Result<String, String> {
             .map_err(|e| e.to_string())?;
         let end = Instant::now();
         engine
-            .rec_error(&model, &x_small, &weights)
+            .rec_error(&model, &x_small, None, &weights)
             .map_err(|e| e.to_string())?;
         infer_small.push(end.elapsed().as_secs_f64() * 1e3);
         fwd_bwd.push((mid - start).as_secs_f64() * 1e3);

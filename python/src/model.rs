@@ -66,7 +66,7 @@ impl Model {
             let c = conditions
                 .map(|c| c.narrow(0, chunk[0], chunk.len()))
                 .transpose()?;
-            let encoded = trained.model.encode_cond(&x, c.as_ref(), Mode::Eval)?;
+            let encoded = trained.model.encode(&x, c.as_ref(), Mode::Eval)?;
             let flat = |t: &Tensor| -> meshvae::Result<Rows> {
                 Ok(t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>()?)
             };
@@ -185,10 +185,7 @@ impl Model {
             .transpose()
             .map_err(|e| to_py(VaeError::from(e)))?;
         let meshes = py
-            .detach(|| {
-                self.inner
-                    .decode_latents_cond(&latents, conditions.as_deref())
-            })
+            .detach(|| self.inner.decode_latents(&latents, conditions.as_deref()))
             .map_err(to_py)?;
         let v = self.inner.spec.vertices;
         let out_shape = if single { vec![v, 3] } else { vec![n, v, 3] };

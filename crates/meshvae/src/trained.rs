@@ -143,7 +143,7 @@ impl TrainedModel {
     }
 
     /// The one-hot labels `[B, L]` of the meshes `ids` of the model's set for a conditional
-    /// model, `None` for an unconditional one: what `MeshVae::encode_cond` and friends take.
+    /// model, `None` for an unconditional one: what `MeshVae::encode` and friends take.
     ///
     /// Errors: an index out of range.
     pub fn conditions(&self, ids: &[usize]) -> Result<Option<candle_core::Tensor>> {
@@ -180,25 +180,25 @@ impl TrainedModel {
     /// decode(μ(x, c), c) for features x `[B, V, 9]` (labels c `[B, L]` for a conditional
     /// model).
     pub fn reconstruct_batch(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        match self.with_engine(x.dim(0)?, |e, m| e.reconstruct_cond(m, x, c)) {
+        match self.with_engine(x.dim(0)?, |e, m| e.reconstruct(m, x, c)) {
             Some(done) => done,
-            None => self.model.reconstruct_cond(x, c),
+            None => self.model.reconstruct(x, c),
         }
     }
 
     /// The encoder means μ `[B, latent]` of features x `[B, V, 9]`.
     pub fn encode_mu(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        match self.with_engine(x.dim(0)?, |e, m| e.encode_cond(m, x, c)) {
+        match self.with_engine(x.dim(0)?, |e, m| e.encode(m, x, c)) {
             Some(done) => done.map(|(mu, _)| mu),
-            None => Ok(self.model.encode_cond(x, c, Mode::Eval)?.mu),
+            None => Ok(self.model.encode(x, c, Mode::Eval)?.mu),
         }
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]`.
     pub fn decode_batch(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        match self.with_engine(z.dim(0)?, |e, m| e.decode_cond(m, z, c)) {
+        match self.with_engine(z.dim(0)?, |e, m| e.decode(m, z, c)) {
             Some(done) => done,
-            None => self.model.decode_cond(z, c, Mode::Eval),
+            None => self.model.decode(z, c, Mode::Eval),
         }
     }
 

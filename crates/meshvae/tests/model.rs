@@ -93,7 +93,7 @@ fn every_structure_conv_and_pool_gives_the_right_shapes_and_ranges() {
                 assert_eq!(v, 162);
                 let x = features(3, v, DType::F32, 1);
                 let eps = noise(3, 16, DType::F32, 2);
-                let (x_hat, enc) = model.forward(&x, &eps, Mode::Train).unwrap();
+                let (x_hat, enc) = model.forward(&x, None, &eps, Mode::Train).unwrap();
                 assert_eq!(enc.mu.dims(), &[3, 16], "{case}");
                 assert_eq!(enc.sigma.dims(), &[3, 16], "{case}");
                 assert_eq!(x_hat.dims(), &[3, v, 9], "{case}");
@@ -108,7 +108,7 @@ fn every_structure_conv_and_pool_gives_the_right_shapes_and_ranges() {
                 let spread = out.iter().cloned().fold(f64::MIN, f64::max)
                     - out.iter().cloned().fold(f64::MAX, f64::min);
                 assert!(spread > 1e-4, "{case}: spread {spread}");
-                let rec = model.reconstruct(&x).unwrap();
+                let rec = model.reconstruct(&x, None).unwrap();
                 assert_eq!(rec.dims(), &[3, v, 9], "{case}");
                 // The formula agrees with the variables actually created.
                 let counted = model.param_count();
@@ -145,11 +145,11 @@ fn gradient_check(config: &ModelConfig, hierarchies: &mut Hierarchies) -> (f64, 
     let eps = noise(2, latent, DType::F64, 5);
     let weights = LossWeights::default();
     let loss = || -> f64 {
-        let l = model.loss(&x, &eps, &weights).unwrap();
+        let l = model.loss(&x, None, &eps, &weights).unwrap();
         l.total.to_scalar::<f64>().unwrap()
     };
     let grads = model
-        .backward(&model.loss(&x, &eps, &weights).unwrap().total)
+        .backward(&model.loss(&x, None, &eps, &weights).unwrap().total)
         .unwrap();
     let step = 1e-4;
     let (mut worst, mut at) = (0.0f64, String::new());
@@ -260,8 +260,8 @@ fn loss_terms_have_the_documented_values() {
         1,
     )
     .unwrap();
-    let loss = model.loss(&x, &eps, &w).unwrap();
-    let (x_hat, enc) = twin.forward(&x, &eps, Mode::Train).unwrap();
+    let loss = model.loss(&x, None, &eps, &w).unwrap();
+    let (x_hat, enc) = twin.forward(&x, None, &eps, Mode::Train).unwrap();
     let sse: f64 = values(&x)
         .iter()
         .zip(values(&x_hat))
@@ -290,13 +290,13 @@ fn loss_terms_have_the_documented_values() {
     // The L2 term includes biases and γ: γ = 1 contributes ½ per channel of each batch norm.
     assert!(l2 > 4.0 * 9.0 * 0.5);
     // Validation: w_rec · mean SSE of decode(μ) in eval mode.
-    let rec = model.reconstruct(&x).unwrap();
+    let rec = model.reconstruct(&x, None).unwrap();
     let sse: f64 = values(&x)
         .iter()
         .zip(values(&rec))
         .map(|(a, b)| (a - b).powi(2))
         .sum();
-    let val = model.rec_error(&x, &w).unwrap();
+    let val = model.rec_error(&x, None, &w).unwrap();
     assert!((val - 2.0 * sse / 3.0).abs() < 1e-9 * val);
 }
 
@@ -309,10 +309,10 @@ fn the_decoder_dense_layer_follows_the_mu_head() {
     };
     let model = MeshVae::new(&config, hierarchies.get(&config), &Device::Cpu, 1).unwrap();
     let z = noise(2, 8, DType::F32, 3);
-    let before = values(&model.decode(&z, Mode::Eval).unwrap());
+    let before = values(&model.decode(&z, None, Mode::Eval).unwrap());
     let w_mu = var(&model, "enc.mu.weight");
     w_mu.set(&(w_mu.as_tensor() * 3.0).unwrap()).unwrap();
-    let after = values(&model.decode(&z, Mode::Eval).unwrap());
+    let after = values(&model.decode(&z, None, Mode::Eval).unwrap());
     let change = before
         .iter()
         .zip(&after)
@@ -322,7 +322,7 @@ fn the_decoder_dense_layer_follows_the_mu_head() {
     // W_σ does not take part in decoding.
     let w_sigma = var(&model, "enc.sigma.weight");
     w_sigma.set(&(w_sigma.as_tensor() * 3.0).unwrap()).unwrap();
-    assert_eq!(values(&model.decode(&z, Mode::Eval).unwrap()), after);
+    assert_eq!(values(&model.decode(&z, None, Mode::Eval).unwrap()), after);
 }
 
 #[test]
@@ -349,14 +349,14 @@ fn training_steps_lower_the_loss() {
     }
     let x = Tensor::from_vec(data, (4, 162, 9), &Device::Cpu).unwrap();
     let weights = LossWeights::default();
-    let first = model.rec_error(&x, &weights).unwrap();
+    let first = model.rec_error(&x, None, &weights).unwrap();
     let mut rng = Rng::new(1);
     for _ in 0..30 {
         let eps = rng.normal_tensor((4, 16), &Device::Cpu).unwrap();
-        let loss = model.loss(&x, &eps, &weights).unwrap();
+        let loss = model.loss(&x, None, &eps, &weights).unwrap();
         adam.step(&model.backward(&loss.total).unwrap()).unwrap();
     }
-    let last = model.rec_error(&x, &weights).unwrap();
+    let last = model.rec_error(&x, None, &weights).unwrap();
     assert!(last < 0.9 * first, "{first} → {last}");
 }
 
@@ -395,8 +395,8 @@ fn same_seed_same_model_and_save_load_round_trips() {
     let x = features(2, 162, DType::F32, 1);
     let eps = noise(2, 8, DType::F32, 2);
     let weights = LossWeights::default();
-    let la = a.loss(&x, &eps, &weights).unwrap();
-    let lb = b.loss(&x, &eps, &weights).unwrap();
+    let la = a.loss(&x, None, &eps, &weights).unwrap();
+    let lb = b.loss(&x, None, &eps, &weights).unwrap();
     assert_eq!(
         la.total.to_scalar::<f32>().unwrap(),
         lb.total.to_scalar::<f32>().unwrap()
@@ -409,8 +409,8 @@ fn same_seed_same_model_and_save_load_round_trips() {
     let mut loaded = MeshVae::new(&config, &h, &dev, 99).unwrap();
     loaded.load(&path).unwrap();
     assert_eq!(
-        values(&a.reconstruct(&x).unwrap()),
-        values(&loaded.reconstruct(&x).unwrap())
+        values(&a.reconstruct(&x, None).unwrap()),
+        values(&loaded.reconstruct(&x, None).unwrap())
     );
     let ta = a.tensors().unwrap();
     for (name, t) in loaded.tensors().unwrap() {
@@ -483,20 +483,20 @@ fn bad_input_is_a_typed_error() {
         ..Default::default()
     };
     let model = MeshVae::new(&config, hierarchies.get(&config), &Device::Cpu, 1).unwrap();
-    let msg = shape_err(model.encode(&features(2, 161, DType::F32, 1), Mode::Eval));
+    let msg = shape_err(model.encode(&features(2, 161, DType::F32, 1), None, Mode::Eval));
     assert!(msg.contains("162"), "{msg}");
     let eight = Tensor::zeros((2, 162, 8), DType::F32, &Device::Cpu).unwrap();
-    shape_err(model.encode(&eight, Mode::Eval));
+    shape_err(model.encode(&eight, None, Mode::Eval));
     let rank2 = Tensor::zeros((162, 9), DType::F32, &Device::Cpu).unwrap();
-    shape_err(model.encode(&rank2, Mode::Eval));
+    shape_err(model.encode(&rank2, None, Mode::Eval));
     let empty = Tensor::zeros((0, 162, 9), DType::F32, &Device::Cpu).unwrap();
-    shape_err(model.encode(&empty, Mode::Eval));
-    let msg = shape_err(model.encode(&features(2, 162, DType::F64, 1), Mode::Eval));
+    shape_err(model.encode(&empty, None, Mode::Eval));
+    let msg = shape_err(model.encode(&features(2, 162, DType::F64, 1), None, Mode::Eval));
     assert!(msg.contains("F64"), "{msg}");
     let x = features(2, 162, DType::F32, 1);
-    shape_err(model.forward(&x, &noise(3, 8, DType::F32, 1), Mode::Train));
-    shape_err(model.forward(&x, &noise(2, 7, DType::F32, 1), Mode::Train));
-    shape_err(model.decode(&noise(2, 9, DType::F32, 1), Mode::Eval));
+    shape_err(model.forward(&x, None, &noise(3, 8, DType::F32, 1), Mode::Train));
+    shape_err(model.forward(&x, None, &noise(2, 7, DType::F32, 1), Mode::Train));
+    shape_err(model.decode(&noise(2, 9, DType::F32, 1), None, Mode::Eval));
     let bad = ModelConfig {
         latent: 0,
         ..config
@@ -523,9 +523,9 @@ fn l2_applied_by_adam_equals_l2_through_autograd() {
     for step in 0..3 {
         let x = features(4, 162, DType::F32, 20 + step);
         let eps = noise(4, 16, DType::F32, 30 + step);
-        let full = a.loss(&x, &eps, &weights).unwrap();
+        let full = a.loss(&x, None, &eps, &weights).unwrap();
         adam_a.step(&a.backward(&full.total).unwrap()).unwrap();
-        let split = b.training_loss(&x, &eps, &weights).unwrap();
+        let split = b.training_loss(&x, None, &eps, &weights).unwrap();
         assert!(
             (split.l2 - full.l2).abs() <= 1e-5 * full.l2,
             "{} vs {}",

@@ -76,21 +76,15 @@ impl Generated {
 }
 
 impl TrainedModel {
-    /// Meshes decoded (inference mode) from latent vectors, each of the model's latent size
-    /// (unconditional models).
+    /// Meshes decoded (inference mode) from latent vectors, each of the model's latent size,
+    /// with, for a conditional model, one label vector per latent vector (`conditions[i]` has
+    /// one weight per model label: a one-hot row as `MeshVae::one_hot` makes, or a blend of two
+    /// for an interpolation).
     ///
-    /// Errors: a vector of the wrong length or with non-finite values.
-    pub fn decode_latents(&self, latents: &[Vec<f32>]) -> Result<Vec<Vec<[f64; 3]>>> {
-        self.decode_latents_cond(latents, None)
-    }
-
-    /// As [`Self::decode_latents`], with one label vector per latent vector for a conditional
-    /// model (`conditions[i]` has one weight per model label: a one-hot row as
-    /// `MeshVae::one_hot` makes, or a blend of two for an interpolation).
-    ///
-    /// Errors: as [`Self::decode_latents`]; conditions missing for a conditional model, given
-    /// to an unconditional one, or not one row of the label count per latent vector.
-    pub fn decode_latents_cond(
+    /// Errors: a vector of the wrong length or with non-finite values; conditions missing for a
+    /// conditional model, given to an unconditional one, or not one row of the label count per
+    /// latent vector.
+    pub fn decode_latents(
         &self,
         latents: &[Vec<f32>],
         conditions: Option<&[Vec<f32>]>,
@@ -341,7 +335,7 @@ fn generate_impl(
         })
         .collect();
     let conditions = condition.map(|row| vec![row; latents.len()]);
-    let positions = model.decode_latents_cond(&latents, conditions.as_deref())?;
+    let positions = model.decode_latents(&latents, conditions.as_deref())?;
     let nearest = model.nearest_meshes(set, &model.split.train, &positions)?;
     Ok(Generated {
         latents,
@@ -453,9 +447,11 @@ mod tests {
         let fewer = set.subset(&[0, 1, 2]).unwrap();
         let err = generate(model, &fewer, &GenerateOptions::default()).unwrap_err();
         assert!(err.to_string().contains("this set has 3"), "{err}");
-        let err = model.decode_latents(&[vec![0.0; 3]]).unwrap_err();
+        let err = model.decode_latents(&[vec![0.0; 3]], None).unwrap_err();
         assert!(err.to_string().contains("latent size is 16"), "{err}");
-        let err = model.decode_latents(&[vec![f32::NAN; 16]]).unwrap_err();
+        let err = model
+            .decode_latents(&[vec![f32::NAN; 16]], None)
+            .unwrap_err();
         assert!(err.to_string().contains("not finite"), "{err}");
         assert!(model.nearest_meshes(set, &[], &[]).is_err());
         assert!(model.nearest_meshes(set, &[99], &[]).is_err());

@@ -73,7 +73,7 @@ pub fn interpolate(
         .collect();
     // A conditional model's label blends from the first mesh's to the second's.
     let conditions = model.conditions_between(a, b, &t)?;
-    let positions = model.decode_latents_cond(&latents, conditions.as_deref())?;
+    let positions = model.decode_latents(&latents, conditions.as_deref())?;
     Ok(Interpolation {
         from: a,
         to: b,

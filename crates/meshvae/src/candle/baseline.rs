@@ -335,10 +335,10 @@ mod tests {
             l2: 0.0,
         };
         let loss = |m: &MeshVae| -> f64 {
-            let l = m.training_loss(&x, &eps, &weights).unwrap();
+            let l = m.training_loss(&x, None, &eps, &weights).unwrap();
             l.total.to_scalar::<f64>().unwrap()
         };
-        let l = model.training_loss(&x, &eps, &weights).unwrap();
+        let l = model.training_loss(&x, None, &eps, &weights).unwrap();
         let grads = model.backward(&l.total).unwrap();
         let mut checked = 0;
         for (name, var) in model.trainable_vars() {
@@ -395,13 +395,13 @@ mod tests {
         let model = MeshVae::with_dtype(&config, &h, &Device::Cpu, DType::F64, 3).unwrap();
         let x = random(&[2, sphere.vertex_count(), 9], 1);
         let e = model
-            .encode(&x, crate::candle::batch_norm::Mode::Eval)
+            .encode(&x, None, crate::candle::batch_norm::Mode::Eval)
             .unwrap();
         assert_eq!(e.mu.dims(), &[2, 128]);
         let sigma: Vec<f64> = e.sigma.flatten_all().unwrap().to_vec1().unwrap();
         assert!(sigma.iter().all(|&s| s > 0.0 && s < 2f64.sqrt()));
         let l = model
-            .training_loss(&x, &random(&[2, 128], 2), &LossWeights::default())
+            .training_loss(&x, None, &random(&[2, 128], 2), &LossWeights::default())
             .unwrap();
         assert!(l.kl > 0.0 && l.rec > 0.0);
         // A position network's input has 3 channels: features are refused.
@@ -411,7 +411,7 @@ mod tests {
         let m = MeshVae::new(&coma, &hc, &Device::Cpu, 1).unwrap();
         let x9 = Tensor::zeros((1, big.vertex_count(), 9), DType::F32, &Device::Cpu).unwrap();
         let err = m
-            .encode(&x9, crate::candle::batch_norm::Mode::Eval)
+            .encode(&x9, None, crate::candle::batch_norm::Mode::Eval)
             .unwrap_err();
         assert!(err.to_string().contains("positions"), "{err}");
         // A hierarchy built for ours is refused.

@@ -269,14 +269,9 @@ impl MeshVae {
         cond::one_hot(self.labels(), labels, self.dtype, &self.device)
     }
 
-    /// μ and σ `[B, latent]` of features x `[B, V, 9]` (unconditional models).
-    pub fn encode(&self, x: &Tensor, mode: Mode) -> Result<Encoded> {
-        self.encode_cond(x, None, mode)
-    }
-
     /// μ and σ `[B, latent]` of features x `[B, V, 9]` with labels c `[B, L]` (one-hot rows;
     /// `Some` exactly when the model is conditional).
-    pub fn encode_cond(&self, x: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Encoded> {
+    pub fn encode(&self, x: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Encoded> {
         self.check_input("MeshVae::encode", x)?;
         let label = self.check_labels("MeshVae::encode", c, x.dim(0)?)?;
         let o = match &self.body {
@@ -310,14 +305,9 @@ impl MeshVae {
         })
     }
 
-    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` (unconditional models).
-    pub fn decode(&self, z: &Tensor, mode: Mode) -> Result<Tensor> {
-        self.decode_cond(z, None, mode)
-    }
-
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` and labels c `[B, L]` (`Some` exactly
     /// when the model is conditional).
-    pub fn decode_cond(&self, z: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Tensor> {
+    pub fn decode(&self, z: &Tensor, c: Option<&Tensor>, mode: Mode) -> Result<Tensor> {
         let batch = self.check_latent("MeshVae::decode", z, None)?;
         let o = match &self.body {
             Body::Ours(o) => o,
@@ -328,7 +318,7 @@ impl MeshVae {
         };
         let coarse = self.vertex_counts[self.vertex_counts.len() - 1];
         let mut h = self
-            .decoder_fc_cond(z, c)?
+            .decoder_fc(z, c)?
             .reshape((batch, coarse, self.config.channels))?
             .transpose(0, 1)?
             .contiguous()?;
@@ -339,44 +329,29 @@ impl MeshVae {
     }
 
     /// x̂ and the posterior for features x `[B, V, 9]` and noise ε `[B, latent]`:
-    /// z = μ + σ ⊙ ε.
-    pub fn forward(&self, x: &Tensor, eps: &Tensor, mode: Mode) -> Result<(Tensor, Encoded)> {
-        self.forward_cond(x, None, eps, mode)
-    }
-
-    /// As [`Self::forward`] with labels c `[B, L]` for both the encoder and the decoder.
-    pub fn forward_cond(
+    /// z = μ + σ ⊙ ε (labels c `[B, L]`, for both the encoder and the decoder, exactly for a
+    /// conditional model).
+    pub fn forward(
         &self,
         x: &Tensor,
         c: Option<&Tensor>,
         eps: &Tensor,
         mode: Mode,
     ) -> Result<(Tensor, Encoded)> {
-        let encoded = self.encode_cond(x, c, mode)?;
+        let encoded = self.encode(x, c, mode)?;
         self.check_latent("MeshVae::forward (eps)", eps, Some(encoded.mu.dim(0)?))?;
         let z = (&encoded.mu + (&encoded.sigma * eps)?)?;
-        Ok((self.decode_cond(&z, c, mode)?, encoded))
-    }
-
-    /// The deterministic reconstruction decode(μ) in eval mode.
-    pub fn reconstruct(&self, x: &Tensor) -> Result<Tensor> {
-        self.reconstruct_cond(x, None)
+        Ok((self.decode(&z, c, mode)?, encoded))
     }
 
     /// decode(μ(x, c), c) in eval mode.
-    pub fn reconstruct_cond(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        let encoded = self.encode_cond(x, c, Mode::Eval)?;
-        self.decode_cond(&encoded.mu, c, Mode::Eval)
-    }
-
-    /// The decoder's dense layer: zW_μᵀ + b_dec `[B, V_L·C]` (unconditional models).
-    #[cfg_attr(not(test), allow(dead_code))]
-    pub(crate) fn decoder_fc(&self, z: &Tensor) -> Result<Tensor> {
-        self.decoder_fc_cond(z, None)
+    pub fn reconstruct(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+        let encoded = self.encode(x, c, Mode::Eval)?;
+        self.decode(&encoded.mu, c, Mode::Eval)
     }
 
     /// The decoder's dense layer: zW_μᵀ + b_dec (+ c·W_dc for a conditional model).
-    pub(crate) fn decoder_fc_cond(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+    pub(crate) fn decoder_fc(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
         let label = self.check_labels("MeshVae::decode", c, z.dim(0)?)?;
         let o = self.ours("the decoder's dense layer")?;
         let h = z.matmul(&o.w_mu.t()?)?.broadcast_add(&o.b_dec)?;

@@ -17,7 +17,7 @@
 //! kernel with K = 2 on D⁻¹A), own or tied decoder weights (a tied convolution runs the encoder's adjoint on the
 //! transposed operator), every pooling (graph pooling is a max pool
 //! over overlapping member lists, remeshing is mean pooling) and the conditional VAE's labels
-//! ([`Engine::forward_backward_cond`]), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
+//! ([`Engine::forward_backward`]), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
 //! anything else is declined, and training then uses candle's path, which stays the reference
 //! (`tests.rs` compares the two).
 //!
@@ -126,23 +126,12 @@ impl Engine {
         Ok(Self { net })
     }
 
-    /// Forward and backward pass on features x `[B, V, 9]` and noise ε `[B, latent]` (the
-    /// model's dtype, CPU) in train mode: updates the batch norms' running statistics as the
-    /// candle path does and leaves every trainable variable's gradient (of w_rec·rec + w_kl·KL,
-    /// without the L2 term) in the engine.
+    /// Forward and backward pass on features x `[B, V, 9]` (labels c `[B, L]`, one-hot rows as
+    /// [`MeshVae::one_hot`] makes them, exactly for a conditional model) and noise ε
+    /// `[B, latent]` (the model's dtype, CPU) in train mode: updates the batch norms' running
+    /// statistics as the candle path does and leaves every trainable variable's gradient (of
+    /// w_rec·rec + w_kl·KL, without the L2 term) in the engine.
     pub fn forward_backward(
-        &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        eps: &Tensor,
-        weights: &LossWeights,
-    ) -> Result<StepLoss> {
-        self.forward_backward_cond(model, x, None, eps, weights)
-    }
-
-    /// As [`Self::forward_backward`] with labels c `[B, L]` (one-hot rows as
-    /// [`MeshVae::one_hot`] makes them; `Some` exactly when the model is conditional).
-    pub fn forward_backward_cond(
         &mut self,
         model: &MeshVae,
         x: &Tensor,
@@ -153,16 +142,11 @@ impl Engine {
         on_net!(&mut self.net, n => n.step(model, Inputs { x, c }, (eps, weights)))
     }
 
-    /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]` in inference mode (z = μ, the
-    /// batch norms' running statistics): [`MeshVae::rec_error`] without candle's per-op
-    /// allocations. Does not disturb the last [`Self::forward_backward`]'s gradients.
-    pub fn rec_error(&mut self, model: &MeshVae, x: &Tensor, weights: &LossWeights) -> Result<f64> {
-        self.rec_error_cond(model, x, None, weights)
-    }
-
-    /// As [`Self::rec_error`] with labels c `[B, L]` (`Some` exactly when the model is
-    /// conditional).
-    pub fn rec_error_cond(
+    /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]` (labels c exactly for a
+    /// conditional model) in inference mode (z = μ, the batch norms' running statistics):
+    /// [`MeshVae::rec_error`] without candle's per-op allocations. Does not disturb the last
+    /// [`Self::forward_backward`]'s gradients.
+    pub fn rec_error(
         &mut self,
         model: &MeshVae,
         x: &Tensor,
@@ -174,8 +158,8 @@ impl Engine {
 
     /// μ and σ `[B, latent]` of features x `[B, V, 9]` in inference mode (the batch norms'
     /// running statistics; labels c `[B, L]` exactly when the model is conditional), as
-    /// [`MeshVae::encode_cond`] in eval mode computes them.
-    pub fn encode_cond(
+    /// [`MeshVae::encode`] in eval mode computes them.
+    pub fn encode(
         &mut self,
         model: &MeshVae,
         x: &Tensor,
@@ -185,18 +169,13 @@ impl Engine {
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` in inference mode, as
-    /// [`MeshVae::decode_cond`] in eval mode.
-    pub fn decode_cond(
-        &mut self,
-        model: &MeshVae,
-        z: &Tensor,
-        c: Option<&Tensor>,
-    ) -> Result<Tensor> {
+    /// [`MeshVae::decode`] in eval mode.
+    pub fn decode(&mut self, model: &MeshVae, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
         on_net!(&mut self.net, n => n.decode(model, z, c))
     }
 
-    /// decode(μ(x, c), c) in inference mode, as [`MeshVae::reconstruct_cond`].
-    pub fn reconstruct_cond(
+    /// decode(μ(x, c), c) in inference mode, as [`MeshVae::reconstruct`].
+    pub fn reconstruct(
         &mut self,
         model: &MeshVae,
         x: &Tensor,

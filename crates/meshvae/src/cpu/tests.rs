@@ -92,12 +92,12 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     let (x, eps) = inputs(&reference, batch, 3);
     let c = labels(&reference, &ours, batch);
     let loss = reference
-        .training_loss_cond(&x, c.as_ref(), &eps, &weights)
+        .training_loss(&x, c.as_ref(), &eps, &weights)
         .unwrap();
     let grads = reference.backward(&loss.total).unwrap();
     let mut engine = Engine::new(&ours, batch + 2).unwrap();
     let got = engine
-        .forward_backward_cond(&ours, &x, c.as_ref(), &eps, &weights)
+        .forward_backward(&ours, &x, c.as_ref(), &eps, &weights)
         .unwrap();
     let case = format!(
         "{} {} {:?} K={} labels {:?} tied {} {dtype:?}",
@@ -270,17 +270,21 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
         // A few steps, so that the running statistics are neither 0/1 nor a batch's own.
         for seed in 0..3 {
             let (x, eps) = inputs(&model, 5, seed);
-            engine.forward_backward(&model, &x, &eps, &weights).unwrap();
+            engine
+                .forward_backward(&model, &x, None, &eps, &weights)
+                .unwrap();
             engine.apply_adam(&mut adam, weights.l2).unwrap();
         }
         let (x, eps) = inputs(&model, 4, 9);
-        engine.forward_backward(&model, &x, &eps, &weights).unwrap();
+        engine
+            .forward_backward(&model, &x, None, &eps, &weights)
+            .unwrap();
         let before = engine.gradients().unwrap();
         // Another batch size than the step's, and one mesh alone (batch statistics would be 0).
         for batch in [3, 1] {
             let (x, _) = inputs(&model, batch, 11);
-            let want = model.rec_error(&x, &weights).unwrap();
-            let got = engine.rec_error(&model, &x, &weights).unwrap();
+            let want = model.rec_error(&x, None, &weights).unwrap();
+            let got = engine.rec_error(&model, &x, None, &weights).unwrap();
             assert!(
                 (got - want).abs() <= tol * want.abs(),
                 "{pool:?} {dtype:?} B={batch}: {got} vs {want}"
@@ -292,15 +296,19 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
                 let d = rel_diff(&values(got), &values(want), 1e-3);
                 assert!(d <= tol, "{case}: {what} differs by {d:e}");
             };
-            let want = model.encode(&x, Mode::Eval).unwrap();
-            let (mu, sigma) = engine.encode_cond(&model, &x, None).unwrap();
+            let want = model.encode(&x, None, Mode::Eval).unwrap();
+            let (mu, sigma) = engine.encode(&model, &x, None).unwrap();
             close(&mu, &want.mu, "μ");
             close(&sigma, &want.sigma, "σ");
             let z = (&want.mu + 0.5).unwrap();
-            let decoded = engine.decode_cond(&model, &z, None).unwrap();
-            close(&decoded, &model.decode(&z, Mode::Eval).unwrap(), "decode");
-            let rec = engine.reconstruct_cond(&model, &x, None).unwrap();
-            close(&rec, &model.reconstruct(&x).unwrap(), "reconstruct");
+            let decoded = engine.decode(&model, &z, None).unwrap();
+            close(
+                &decoded,
+                &model.decode(&z, None, Mode::Eval).unwrap(),
+                "decode",
+            );
+            let rec = engine.reconstruct(&model, &x, None).unwrap();
+            close(&rec, &model.reconstruct(&x, None).unwrap(), "reconstruct");
         }
         for ((name, a), (_, b)) in before.iter().zip(&engine.gradients().unwrap()) {
             assert_eq!(values(a), values(b), "{pool:?}: gradient of {name} changed");
@@ -325,11 +333,12 @@ fn train_clipped(config: &ModelConfig, engine: bool, steps: usize, clip: f64) ->
         let (x, eps) = inputs(&model, batch, 10 + step as u64);
         match e.as_mut() {
             Some(e) => {
-                e.forward_backward(&model, &x, &eps, &weights).unwrap();
+                e.forward_backward(&model, &x, None, &eps, &weights)
+                    .unwrap();
                 e.apply_adam(&mut adam, weights.l2).unwrap();
             }
             None => {
-                let loss = model.training_loss(&x, &eps, &weights).unwrap();
+                let loss = model.training_loss(&x, None, &eps, &weights).unwrap();
                 let grads = model.backward(&loss.total).unwrap();
                 adam.step_with_l2(&grads, weights.l2).unwrap();
             }
@@ -432,17 +441,19 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     let mut engine = Engine::new(&model, 2).unwrap();
     let (x, eps) = inputs(&model, 2, 1);
     let w = LossWeights::default();
-    let err = engine.forward_backward(&model, &x, &eps, &w).unwrap_err();
+    let err = engine
+        .forward_backward(&model, &x, None, &eps, &w)
+        .unwrap_err();
     assert!(err.to_string().contains("give each mesh's label"), "{err}");
     let c = model.one_hot(&["a"]).unwrap();
     let err = engine
-        .forward_backward_cond(&model, &x, Some(&c), &eps, &w)
+        .forward_backward(&model, &x, Some(&c), &eps, &w)
         .unwrap_err();
     assert!(err.to_string().contains("[2, 2]"), "{err}");
     let c = model.one_hot(&["a", "b"]).unwrap();
     assert!(
         engine
-            .forward_backward_cond(&model, &x, Some(&c), &eps, &w)
+            .forward_backward(&model, &x, Some(&c), &eps, &w)
             .is_ok()
     );
 
@@ -457,16 +468,26 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     assert!(engine.apply_adam(&mut adam, 1.0).is_err(), "no step yet");
     let (x, eps) = inputs(&model, 3, 1);
     let w = LossWeights::default();
-    let err = engine.forward_backward(&model, &x, &eps, &w).unwrap_err();
+    let err = engine
+        .forward_backward(&model, &x, None, &eps, &w)
+        .unwrap_err();
     assert!(err.to_string().contains("at most 2"), "{err}");
     let (x, eps) = inputs(&model, 2, 1);
     let short = x.narrow(1, 0, 10).unwrap();
-    assert!(engine.forward_backward(&model, &short, &eps, &w).is_err());
+    assert!(
+        engine
+            .forward_backward(&model, &short, None, &eps, &w)
+            .is_err()
+    );
     let wrong = x.to_dtype(DType::F32).unwrap();
-    assert!(engine.forward_backward(&model, &wrong, &eps, &w).is_err());
+    assert!(
+        engine
+            .forward_backward(&model, &wrong, None, &eps, &w)
+            .is_err()
+    );
     // The model still decodes (the engine left its weights usable).
-    engine.forward_backward(&model, &x, &eps, &w).unwrap();
-    assert!(model.decode(&eps, Mode::Eval).is_ok());
+    engine.forward_backward(&model, &x, None, &eps, &w).unwrap();
+    assert!(model.decode(&eps, None, Mode::Eval).is_ok());
 }
 
 #[test]
@@ -484,25 +505,22 @@ fn conditional_inference_equals_candle_and_bad_latents_are_errors() {
     let mut engine = Engine::new(&model, 4).unwrap();
     let (x, _) = inputs(&model, 3, 5);
     let c = model.one_hot(&["trot", "gallop", "trot"]).unwrap();
-    let want = model.encode_cond(&x, Some(&c), Mode::Eval).unwrap();
-    let (mu, _) = engine.encode_cond(&model, &x, Some(&c)).unwrap();
+    let want = model.encode(&x, Some(&c), Mode::Eval).unwrap();
+    let (mu, _) = engine.encode(&model, &x, Some(&c)).unwrap();
     assert!(rel_diff(&values(&mu), &values(&want.mu), 1e-3) < 1e-10);
-    let rec = engine.reconstruct_cond(&model, &x, Some(&c)).unwrap();
-    let want = model.reconstruct_cond(&x, Some(&c)).unwrap();
+    let rec = engine.reconstruct(&model, &x, Some(&c)).unwrap();
+    let want = model.reconstruct(&x, Some(&c)).unwrap();
     assert!(rel_diff(&values(&rec), &values(&want), 1e-3) < 1e-10);
     // A blend of labels decodes as candle does too.
     let blend = Tensor::from_vec(vec![4.0, 4.0, 8.0, 0.0, 0.0, 8.0], (3, 2), &Device::Cpu).unwrap();
     let z = (&mu * 0.5).unwrap();
-    let got = engine.decode_cond(&model, &z, Some(&blend)).unwrap();
-    let want = model.decode_cond(&z, Some(&blend), Mode::Eval).unwrap();
+    let got = engine.decode(&model, &z, Some(&blend)).unwrap();
+    let want = model.decode(&z, Some(&blend), Mode::Eval).unwrap();
     assert!(rel_diff(&values(&got), &values(&want), 1e-3) < 1e-10);
 
-    let err = engine
-        .decode_cond(&model, &z, None)
-        .unwrap_err()
-        .to_string();
+    let err = engine.decode(&model, &z, None).unwrap_err().to_string();
     assert!(err.contains("label"), "{err}");
     let wide = Tensor::zeros((5, 6), DType::F64, &Device::Cpu).unwrap();
-    let err = engine.decode_cond(&model, &wide, Some(&blend)).unwrap_err();
+    let err = engine.decode(&model, &wide, Some(&blend)).unwrap_err();
     assert!(err.to_string().contains("[1 ..= 4, 6]"), "{err}");
 }

@@ -23,7 +23,8 @@
 //! over every value, and there is no KL term (their weights: `TrainConfig::for_network`).
 //!
 //! ## Conditional models
-//! The `*_cond` variants take each mesh's one-hot label c (encoder and decoder both see it).
+//! Every loss, encoding and decoding takes each mesh's one-hot label c as an `Option` (`Some`
+//! exactly for a conditional model; encoder and decoder both see it).
 //! The KL term stays against N(0, I): Sohn et al.'s simple variant with a prior that does not
 //! depend on c (the paper's p(z|c) written as p(z)), so generation draws z ~ N(0, I) for any c.
 
@@ -89,12 +90,6 @@ impl MeshVae {
         Ok(sum)
     }
 
-    /// The training loss of features x `[B, V, 9]` with noise ε `[B, latent]`, in train mode
-    /// (batch norm uses batch statistics and updates its running ones).
-    pub fn loss(&self, x: &Tensor, eps: &Tensor, weights: &LossWeights) -> Result<Loss> {
-        self.loss_cond(x, None, eps, weights)
-    }
-
     /// w_rec · mean SSE and w_kl · KL of one train-mode forward pass, both differentiable.
     fn weighted_rec_kl(
         &self,
@@ -103,7 +98,7 @@ impl MeshVae {
         eps: &Tensor,
         weights: &LossWeights,
     ) -> Result<(Tensor, Tensor)> {
-        let (x_hat, encoded) = self.forward_cond(x, c, eps, Mode::Train)?;
+        let (x_hat, encoded) = self.forward(x, c, eps, Mode::Train)?;
         let rec = (rec_term(x, &x_hat, self.config().net.rec_loss())? * weights.rec)?;
         // A plain auto-encoder has no posterior to compare with the prior.
         let kl = match self.config().net.is_variational() {
@@ -113,8 +108,10 @@ impl MeshVae {
         Ok((rec, kl))
     }
 
-    /// As [`Self::loss`] with labels c `[B, L]` (conditional models).
-    pub fn loss_cond(
+    /// The training loss of features x `[B, V, 9]` (labels c `[B, L]` exactly for a
+    /// conditional model) with noise ε `[B, latent]`, in train mode (batch norm uses batch
+    /// statistics and updates its running ones).
+    pub fn loss(
         &self,
         x: &Tensor,
         c: Option<&Tensor>,
@@ -137,12 +134,7 @@ impl MeshVae {
     /// `Adam::step_with_l2(grads, weights.l2)`, which adds the L2 gradient w_l2·θ itself: the same
     /// update, without autograd keeping an L2 gradient the size of every parameter (≈ 0.4 GB on
     /// elephant-gallop).
-    pub fn training_loss(&self, x: &Tensor, eps: &Tensor, weights: &LossWeights) -> Result<Loss> {
-        self.training_loss_cond(x, None, eps, weights)
-    }
-
-    /// As [`Self::training_loss`] with labels c `[B, L]` (conditional models).
-    pub fn training_loss_cond(
+    pub fn training_loss(
         &self,
         x: &Tensor,
         c: Option<&Tensor>,
@@ -169,19 +161,10 @@ impl MeshVae {
     }
 
     /// The validation loss: w_rec · mean_b Σ (x − x̂)² with x̂ = decode(μ) in eval mode (the
-    /// authors' `:130`). Sum these × B over batches and divide by the count for a true mean.
-    pub fn rec_error(&self, x: &Tensor, weights: &LossWeights) -> Result<f64> {
-        self.rec_error_cond(x, None, weights)
-    }
-
-    /// As [`Self::rec_error`] with labels c `[B, L]` (conditional models).
-    pub fn rec_error_cond(
-        &self,
-        x: &Tensor,
-        c: Option<&Tensor>,
-        weights: &LossWeights,
-    ) -> Result<f64> {
-        let x_hat = self.reconstruct_cond(x, c)?;
+    /// authors' `:130`; labels c `[B, L]` exactly for a conditional model). Sum these × B over
+    /// batches and divide by the count for a true mean.
+    pub fn rec_error(&self, x: &Tensor, c: Option<&Tensor>, weights: &LossWeights) -> Result<f64> {
+        let x_hat = self.reconstruct(x, c)?;
         Ok(scalar(&rec_term(x, &x_hat, self.config().net.rec_loss())?)? * weights.rec)
     }
 }

@@ -6,20 +6,10 @@ use crate::train::data::MeshData;
 use crate::train::loss::LossWeights;
 use candle_core::Device;
 
-/// w_rec · mean over `ids` of the squared error with z = μ (inference mode), or `None`.
+/// w_rec · mean over `ids` of the reconstruction error with z = μ (inference mode), or `None`
+/// without meshes; through `engine` if given (it must be the model's: the same error without
+/// candle's per-op allocations).
 pub fn validation_loss(
-    model: &MeshVae,
-    data: &MeshData,
-    ids: &[usize],
-    batch: usize,
-    weights: &LossWeights,
-    device: &Device,
-) -> Result<Option<f64>> {
-    epoch_loss(model, data, ids, batch, weights, device, None)
-}
-
-/// [`validation_loss`], through `engine` if given (it must be the model's).
-pub(super) fn epoch_loss(
     model: &MeshVae,
     data: &MeshData,
     ids: &[usize],
@@ -36,8 +26,8 @@ pub(super) fn epoch_loss(
         let x = data.batch(chunk, device)?;
         let c = data.conditions(model, chunk)?;
         let error = match engine.as_deref_mut() {
-            Some(engine) => engine.rec_error_cond(model, &x, c.as_ref(), weights)?,
-            None => model.rec_error_cond(&x, c.as_ref(), weights)?,
+            Some(engine) => engine.rec_error(model, &x, c.as_ref(), weights)?,
+            None => model.rec_error(&x, c.as_ref(), weights)?,
         };
         sum += error * chunk.len() as f64;
     }

@@ -10,7 +10,7 @@ use super::checkpoint::{Checkpoint, Progress};
 use super::epoch_log::{EpochRecord, read_log, truncate_log};
 use super::executor::{Executor, ExecutorKind};
 use super::folder::{ModelFolder, ModelSpec};
-use super::loss_pass::epoch_loss;
+use super::loss_pass::validation_loss;
 use super::phases::PhaseSeconds;
 use super::request::{TrainOptions, TrainRequest, TrainSummary, hierarchy_config};
 use super::rollback::{self, Recovery};
@@ -363,7 +363,7 @@ impl<'a> Trainer<'a> {
         let Some(engine) = engine else {
             // The L2 term's gradient is applied by Adam (see `MeshVae::training_loss`).
             let t = Instant::now();
-            let l = self.model.training_loss_cond(&x, c.as_ref(), &eps, loss)?;
+            let l = self.model.training_loss(&x, c.as_ref(), &eps, loss)?;
             let total = l.total.to_dtype(DType::F64)?.to_scalar::<f64>()? + l.l2;
             if !total.is_finite() {
                 return Ok(diverged(total, l.rec, l.kl, l.l2));
@@ -378,7 +378,7 @@ impl<'a> Trainer<'a> {
         let model = &self.model;
         let l = self.phases.time(
             |p| &mut p.forward_backward,
-            || engine.forward_backward_cond(model, &x, c.as_ref(), &eps, loss),
+            || engine.forward_backward(model, &x, c.as_ref(), &eps, loss),
         )?;
         if !(l.rec + l.kl).is_finite() {
             let l2 = model.l2_term()?.to_dtype(DType::F64)?.to_scalar::<f64>()? * w_l2;
@@ -402,7 +402,7 @@ impl<'a> Trainer<'a> {
     fn loss_on(&self, ids: &[usize], engine: Option<&mut Engine>) -> Result<Option<f64>> {
         let (batch, loss) = (self.spec.train.batch, &self.spec.train.loss);
         let device = &self.options.device;
-        epoch_loss(&self.model, &self.data, ids, batch, loss, device, engine)
+        validation_loss(&self.model, &self.data, ids, batch, loss, device, engine)
     }
 
     /// The look at the validation loss after an epoch: the loss, and the divergence it shows,

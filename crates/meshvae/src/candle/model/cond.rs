@@ -217,8 +217,8 @@ mod tests {
         let c = cond.one_hot(&["pose", "gallop", "trot"]).unwrap();
         let blend = Tensor::new(&[[0.25f64, 0.75, 0.0]], &Device::Cpu).unwrap();
         let c = Tensor::cat(&[&c.narrow(0, 0, 2).unwrap(), &blend], 0).unwrap();
-        let got = cond.encode_cond(&x, Some(&c), Mode::Eval).unwrap();
-        let base = plain.encode(&x, Mode::Eval).unwrap();
+        let got = cond.encode(&x, Some(&c), Mode::Eval).unwrap();
+        let base = plain.encode(&x, None, Mode::Eval).unwrap();
         let w = |name: &str| rows(cond.trainable()[name].as_tensor());
         let (w_mu, w_sigma, w_dec) = (
             w("enc.mu.label_weight"),
@@ -246,8 +246,8 @@ mod tests {
             }
         }
         let z = random(&[3, 5], 2);
-        let h = rows(&cond.decoder_fc_cond(&z, Some(&c)).unwrap());
-        let h0 = rows(&plain.decoder_fc(&z).unwrap());
+        let h = rows(&cond.decoder_fc(&z, Some(&c)).unwrap());
+        let h0 = rows(&plain.decoder_fc(&z, None).unwrap());
         for b in 0..3 {
             for (p, (&got, &base)) in h[b].iter().zip(&h0[b]).enumerate() {
                 let want = base + (0..3).map(|k| cs[b][k] * w_dec[k][p]).sum::<f64>();
@@ -257,7 +257,7 @@ mod tests {
         // The decoder sees the label: two labels decode one z differently.
         let z1 = random(&[1, 5], 3);
         let [a, b] = ["gallop", "pose"].map(|l| {
-            let y = cond.decode_cond(&z1, Some(&cond.one_hot(&[l]).unwrap()), Mode::Eval);
+            let y = cond.decode(&z1, Some(&cond.one_hot(&[l]).unwrap()), Mode::Eval);
             y.unwrap().flatten_all().unwrap().to_vec1::<f64>().unwrap()
         });
         assert!(a.iter().zip(&b).any(|(p, q)| (p - q).abs() > 1e-6));
@@ -273,10 +273,10 @@ mod tests {
         let c = cond.one_hot(&["trot", "gallop"]).unwrap();
         let weights = LossWeights::default();
         let loss = |m: &MeshVae| -> f64 {
-            let l = m.loss_cond(&x, Some(&c), &eps, &weights).unwrap();
+            let l = m.loss(&x, Some(&c), &eps, &weights).unwrap();
             l.total.to_scalar().unwrap()
         };
-        let total = cond.loss_cond(&x, Some(&c), &eps, &weights).unwrap().total;
+        let total = cond.loss(&x, Some(&c), &eps, &weights).unwrap().total;
         let grads = cond.backward(&total).unwrap();
         for name in crate::net::vars::LABEL_NAMES {
             let var = cond.trainable()[name].clone();
@@ -317,25 +317,25 @@ mod tests {
         let (cond, plain) = pair();
         let v = cond.vertex_count();
         let x = random(&[2, v, 9], 1);
-        let err = cond.encode(&x, Mode::Eval).unwrap_err().to_string();
+        let err = cond.encode(&x, None, Mode::Eval).unwrap_err().to_string();
         assert!(
             err.contains("conditional on the labels gallop, pose, trot"),
             "{err}"
         );
         let err = cond
-            .decode(&random(&[2, 5], 1), Mode::Eval)
+            .decode(&random(&[2, 5], 1), None, Mode::Eval)
             .unwrap_err()
             .to_string();
         assert!(err.contains("give each mesh's label"), "{err}");
         let c = cond.one_hot(&["pose", "pose"]).unwrap();
         let err = plain
-            .encode_cond(&x, Some(&c), Mode::Eval)
+            .encode(&x, Some(&c), Mode::Eval)
             .unwrap_err()
             .to_string();
         assert!(err.contains("not conditional"), "{err}");
         let one = cond.one_hot(&["pose"]).unwrap();
         let err = cond
-            .encode_cond(&x, Some(&one), Mode::Eval)
+            .encode(&x, Some(&one), Mode::Eval)
             .unwrap_err()
             .to_string();
         assert!(err.contains("expected [2, 3]"), "{err}");

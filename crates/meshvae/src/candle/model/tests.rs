@@ -53,7 +53,7 @@ fn tied_decoder_convolutions_are_the_adjoints_of_the_encoders() {
         }
         // The gradient of a decoder-only loss reaches the encoder's convolution weights.
         let z = random(&[2, 4], 3);
-        let out = model.decode(&z, Mode::Train).unwrap();
+        let out = model.decode(&z, None, Mode::Train).unwrap();
         let grads = model.backward(&out.sum_all().unwrap()).unwrap();
         let name = if conv == ConvKind::Spectral {
             "enc.conv0.weight"
@@ -77,7 +77,7 @@ fn the_decoder_dense_layer_is_the_transposed_mu_head() {
         .set(&random(&[model.flat_width()], 5))
         .unwrap();
     let z = random(&[3, 6], 4);
-    let got: Vec<Vec<f64>> = model.decoder_fc(&z).unwrap().to_vec2().unwrap();
+    let got: Vec<Vec<f64>> = model.decoder_fc(&z, None).unwrap().to_vec2().unwrap();
     let w: Vec<Vec<f64>> = model.trainable()["enc.mu.weight"]
         .as_tensor()
         .to_vec2()
