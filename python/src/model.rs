@@ -2,7 +2,7 @@
 
 use crate::arrays::{self, array};
 use crate::errors::{Kind, input, raise, to_py};
-use candle_core::{DType, Device, Tensor};
+use candle_core::{DType, Tensor};
 use meshvae::{Mode, TrainedModel, VaeError};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -61,7 +61,7 @@ impl Model {
         let ids: Vec<usize> = (0..set.len()).collect();
         for chunk in ids.chunks(CHUNK) {
             let x = trained
-                .encode_input(&extractor, set, chunk, &Device::Cpu)?
+                .encode_input(&extractor, set, chunk, &meshvae::default_device())?
                 .to_dtype(trained.model.dtype())?;
             let c = conditions
                 .map(|c| c.narrow(0, chunk[0], chunk.len()))
@@ -100,7 +100,7 @@ impl Model {
             ));
         }
         let inner = py
-            .detach(|| TrainedModel::load(&path, &Device::Cpu))
+            .detach(|| TrainedModel::load(&path, &meshvae::default_device()))
             .map_err(to_py)?;
         Ok(Self { inner })
     }

@@ -3,7 +3,6 @@
 
 use crate::CliError;
 use crate::generate::model_and_set_selected;
-use candle_core::Device;
 use meshvae::ModelFolder;
 use std::path::PathBuf;
 
@@ -36,7 +35,7 @@ pub struct EvalArgs {
 pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
     let (trained, set) =
         model_and_set_selected(&args.model, args.set.as_ref(), args.select_on_test)?;
-    let report = trained.evaluate(&set, &Device::Cpu)?;
+    let report = trained.evaluate(&set, &meshvae::default_device())?;
     let epochs = trained.epochs_trained()?;
     let folder = ModelFolder::new(&args.model);
     let status = meshvae::read_status(&folder)?;

@@ -2,7 +2,6 @@
 //! plus the helpers the applications (`generate`, `interpolate`, `embed`) share.
 
 use crate::{CliError, print_warnings};
-use candle_core::Device;
 use mesh_io::{MeshSet, TriMesh};
 use mesh_render::{Bounds, Image, RenderOptions, Tile, View};
 use meshvae::{GenerateOptions, TrainedModel};
@@ -51,7 +50,7 @@ pub fn model_and_set_selected(
     set: Option<&PathBuf>,
     select_on_test: bool,
 ) -> Result<(TrainedModel, MeshSet), CliError> {
-    let trained = TrainedModel::load_selected(model, &Device::Cpu, select_on_test)?;
+    let trained = TrainedModel::load_selected(model, &meshvae::default_device(), select_on_test)?;
     let executor = trained.inference_executor();
     if executor.reason.is_some() {
         eprintln!("note: the network runs on {executor}");
@@ -80,7 +79,7 @@ pub fn check_quality(
     model: &Path,
 ) -> Result<serde_json::Value, CliError> {
     let status = meshvae::read_status(&meshvae::ModelFolder::new(model))?;
-    let warnings = trained.quality_warnings(set, status.as_ref(), &Device::Cpu)?;
+    let warnings = trained.quality_warnings(set, status.as_ref(), &meshvae::default_device())?;
     Ok(print_quality(&warnings))
 }
 

@@ -2,7 +2,6 @@
 
 use crate::generate::model_and_set;
 use crate::{CliError, print_warnings};
-use candle_core::Device;
 use deform_features::FeatureOptions;
 use mesh_hierarchy::{DepoolMode, HierarchyConfig};
 use mesh_io::{MeshSet, TriMesh};
@@ -418,7 +417,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         } else {
             50
         }),
-        device: Device::Cpu,
+        device: meshvae::default_device(),
         engine: !args.no_engine,
         ..TrainOptions::default()
     };
@@ -507,7 +506,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<(), CliError> {
         path: args.out.clone(),
         message: e.to_string(),
     })?;
-    let mut meshes = trained.reconstruct(&set, &ids, &Device::Cpu)?;
+    let mut meshes = trained.reconstruct(&set, &ids, &meshvae::default_device())?;
     // Where `eval` measures them: the decoder fixes a shape up to a translation.
     for (&i, mesh) in ids.iter().zip(meshes.iter_mut()) {
         meshvae::align_centroids(set.frame(i), mesh);

@@ -106,8 +106,8 @@ pub use train::schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopR
 pub use train::split::{Selection, Split, resolve_mesh};
 pub use train::{
     EpochRecord, Executor, ExecutorKind, PhaseSeconds, RunStatus, SPIKE_FACTOR, SPIKE_WINDOW,
-    TrainOptions, TrainRequest, TrainSummary, hierarchy_config, loss_spikes, read_log, read_status,
-    train, validation_loss,
+    TrainOptions, TrainRequest, TrainSummary, default_device, hierarchy_config, loss_spikes,
+    read_log, read_status, train, validation_loss,
 };
 
 // A trained model folder loaded for use (`trained.rs`).

@@ -5,8 +5,16 @@
 
 use crate::candle::model::MeshVae;
 use crate::cpu::Engine;
+use candle_core::Device;
 use serde::{Deserialize, Serialize};
 use std::fmt;
+
+/// The device every command trains and runs its models on: the one place that chooses it. The
+/// CPU, where the engine runs; on another device the steps would fall to candle's autograd
+/// ([`Executor::choose`] says so in every run's log).
+pub fn default_device() -> Device {
+    Device::Cpu
+}
 
 /// The implementation that computes the steps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

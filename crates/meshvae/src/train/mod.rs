@@ -51,7 +51,7 @@ mod status;
 mod trainer;
 
 pub use epoch_log::{EpochRecord, SPIKE_FACTOR, SPIKE_WINDOW, loss_spikes, read_log};
-pub use executor::{Executor, ExecutorKind};
+pub use executor::{Executor, ExecutorKind, default_device};
 pub use loss_pass::validation_loss;
 pub use phases::PhaseSeconds;
 pub use request::{TrainOptions, TrainRequest, TrainSummary, hierarchy_config};

@@ -82,7 +82,7 @@ impl Default for TrainOptions {
             best_in_memory_params: 16 << 20,
             keep_selected_on_test: false,
             test_every_steps: 10,
-            device: Device::Cpu,
+            device: super::default_device(),
             engine: true,
             fail_step: None,
             fail_after_rollback: false,
