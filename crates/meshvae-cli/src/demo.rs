@@ -260,7 +260,7 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
     run_as(
         "reconstruct",
         &argv![path("model"), "--out", path("reconstruction"), "--sheet"],
-        train::run_reconstruct,
+        crate::reconstruct::run,
     )?;
 
     out!("\n8. A picture of the whole set.");

@@ -27,7 +27,9 @@ mod info;
 mod interpolate;
 mod loss_plot;
 mod pack;
+mod reconstruct;
 mod render;
+mod roundtrip;
 mod simplify;
 mod synth;
 mod train;
@@ -60,7 +62,7 @@ enum Command {
     /// Compute the ACAP deformation features of a set (safetensors, normalisation as metadata).
     Features(features::FeaturesArgs),
     /// Features -> meshes for every frame; prints the reconstruction errors.
-    Roundtrip(features::RoundtripArgs),
+    Roundtrip(roundtrip::RoundtripArgs),
     /// Simplify a mesh (or a set's template) by quadric edge collapse with the edge-length
     /// term, or remesh it isotropically (`--method remesh`).
     Simplify(simplify::SimplifyArgs),
@@ -69,7 +71,7 @@ enum Command {
     /// Reconstruction errors of a trained model on its test and training meshes.
     Eval(eval::EvalArgs),
     /// Write a trained model's reconstructions of the test meshes (or all) as OBJ files.
-    Reconstruct(train::ReconstructArgs),
+    Reconstruct(reconstruct::ReconstructArgs),
     /// Render a mesh, or a grid of a set's meshes, to PNG (optionally coloured by the error
     /// against a ground truth).
     Render(render::RenderArgs),
@@ -90,11 +92,11 @@ fn main() -> ExitCode {
         Command::Synth(args) => synth::run(args),
         Command::Pack(args) => pack::run(args),
         Command::Features(args) => features::run_features(args),
-        Command::Roundtrip(args) => features::run_roundtrip(args),
+        Command::Roundtrip(args) => roundtrip::run(args),
         Command::Simplify(args) => simplify::run(args),
         Command::Train(args) => train::run_train(args),
         Command::Eval(args) => eval::run_eval(args),
-        Command::Reconstruct(args) => train::run_reconstruct(args),
+        Command::Reconstruct(args) => reconstruct::run(args),
         Command::Render(args) => render::run(args),
         Command::Generate(args) => generate::run(args),
         Command::Interpolate(args) => interpolate::run(args),
