@@ -87,10 +87,15 @@ pub(super) fn frameworks(md: &mut String, o: &Outcome) {
         md.push('\n');
     }
     md.push_str("As defined by:\n\n");
-    for (id, label, _) in ROWS {
-        if let Some(c) = column(id) {
-            let _ = writeln!(md, "- {label}: {}.", c.net.defined_by());
+    // The other networks' definitions name them; ours is the paper's, and Gao et al.'s follows.
+    for c in ROWS.iter().filter_map(|(id, _, _)| column(id)) {
+        if c.net.is_ours() {
+            if c.is_ours() {
+                let _ = writeln!(md, "- Ours: {}.", c.net.defined_by());
+            }
+            continue;
         }
+        let _ = writeln!(md, "- {}.", c.net.defined_by());
     }
     md.push_str(
         "- Gao et al. 2018: our network with spatial convolutions (self plus neighbour mean) and \

@@ -413,6 +413,13 @@ fn the_papers_horse_figure_is_shown_in_our_copys_units() {
         "{tan}"
     );
     assert!(row("| Gong et al. 2019").ends_with("| – |"));
+    // Each definition once, under its own name.
+    assert!(
+        section.contains("\n- Ranjan et al. 2018 (CoMA): Chebyshev K = 6"),
+        "{section}"
+    );
+    assert!(section.contains("\n- Ours: Yuan et al. 2020"), "{section}");
+    assert!(!section.contains("(CoMA): Ranjan"), "{section}");
     assert!(md.contains("scaled by 1.6768815 about the origin"), "{md}");
 }
 
