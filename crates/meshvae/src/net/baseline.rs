@@ -105,6 +105,12 @@ impl BaselinePlan {
     /// The plan of `network` (not ours) with latent size `latent` on levels of
     /// `vertex_counts` vertices (template first; the position networks need five levels).
     pub fn new(network: Network, latent: usize, vertex_counts: &[usize]) -> Result<Self> {
+        if vertex_counts.first().is_none_or(|&v| v == 0) {
+            return Err(VaeError::argument(
+                "hierarchy",
+                format!("{network} needs a template with vertices; got levels {vertex_counts:?}"),
+            ));
+        }
         if let Some(net) = network.position_net() {
             return Self::positions(network, net, latent, vertex_counts);
         }
@@ -365,5 +371,6 @@ mod tests {
         assert!(plan.sigma.is_some() && plan.encoder.is_empty());
         assert!(BaselinePlan::new(Network::Coma, 8, &[100, 25]).is_err());
         assert!(BaselinePlan::new(Network::Ours, 8, &[100]).is_err());
+        assert!(BaselinePlan::new(Network::Tan2018, 8, &[]).is_err());
     }
 }
