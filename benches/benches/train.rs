@@ -14,7 +14,7 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use candle_core::{Device, Tensor};
 use criterion::{Criterion, criterion_group, criterion_main};
 use mesh_hierarchy::Hierarchy;
-use meshvae::{Adam, Engine, LossWeights, MeshVae, ModelConfig, Rng};
+use meshvae::{Adam, EngineExecutor, LossWeights, MeshVae, ModelConfig, Rng};
 use std::time::Duration;
 
 const BATCH: usize = 32;
@@ -43,7 +43,8 @@ fn step(c: &mut Criterion) {
         group
             .sample_size(10)
             .measurement_time(Duration::from_secs(10));
-        let mut engine = Engine::new(&model, BATCH).expect("the engine covers the paper's network");
+        let mut engine =
+            EngineExecutor::new(&model, BATCH).expect("the engine covers the paper's network");
         group.bench_function("batch 32, f32: engine (what train() runs)", |b| {
             b.iter(|| {
                 let eps = rng

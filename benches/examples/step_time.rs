@@ -19,7 +19,7 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use candle_core::{Device, Tensor};
 use mesh_hierarchy::Hierarchy;
-use meshvae::{Adam, Engine, LossWeights, MeshVae, ModelConfig, Rng};
+use meshvae::{Adam, Batch, EngineExecutor, Executor, LossWeights, MeshVae, ModelConfig, Rng};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -70,7 +70,7 @@ fn run() -> Result<String, String> {
     let device = Device::Cpu;
     let model = MeshVae::new(&config, &hierarchy, &device, 1).map_err(|e| e.to_string())?;
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).map_err(|e| e.to_string())?;
-    let mut engine = Engine::new(&model, BATCH).map_err(|e| e.to_string())?;
+    let mut engine = EngineExecutor::new(&model, BATCH).map_err(|e| e.to_string())?;
     let mut rng = Rng::new(7);
     let v = set.vertex_count();
     let data: Vec<f32> = (0..BATCH * v * 9)
@@ -97,7 +97,14 @@ fn run() -> Result<String, String> {
             .map_err(|e| e.to_string())?;
         let end = Instant::now();
         engine
-            .rec_error(&model, &x_small, None, &weights)
+            .rec_error(
+                &model,
+                Batch {
+                    x: &x_small,
+                    c: None,
+                },
+                &weights,
+            )
             .map_err(|e| e.to_string())?;
         infer_small.push(end.elapsed().as_secs_f64() * 1e3);
         fwd_bwd.push((mid - start).as_secs_f64() * 1e3);

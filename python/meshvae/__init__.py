@@ -6,6 +6,8 @@ Mesh sets with their vertex order kept (:func:`load_set`, :func:`load_mesh`, :fu
 needs (:class:`Hierarchy`, as ``scipy.sparse.csr_matrix``), and ACAP deformation features with
 their exact inverse (:func:`acap_features`, :class:`Normalization`, :func:`reconstruct`),
 and models trained by ``meshvae train`` (:class:`Model`: ``encode``, ``decode``).
+:mod:`meshvae.sampling` is a psbody-free drop-in for CoMA's, SpiralNet++'s and Neural3DMM's
+``mesh_sampling.generate_transform_matrices``, with SpiralNet++'s ``transform.pkl``.
 
 Arrays are numpy: positions float32 [V, 3] or [N, V, 3], faces int32 [F, 3], features float32
 [N, V, 9]. Errors are :class:`MeshvaeError`: :class:`InputError` (also a ``ValueError``) or
@@ -30,6 +32,7 @@ from ._meshvae import (
     save_obj,
     simplify,
 )
+from . import sampling
 
 __all__ = [
     "FeatureFile",
@@ -47,6 +50,7 @@ __all__ = [
     "load_mesh",
     "load_set",
     "reconstruct",
+    "sampling",
     "save_glb",
     "save_obj",
     "simplify",

@@ -121,6 +121,25 @@ class Hierarchy:
     def depool(self, step: int, x: _Floats) -> _F32:
         """[m, C] or [B, m, C] -> [n, C] or [B, n, C]."""
 
+def _sampling_levels(
+    vertices: _Floats,
+    faces: _Ints,
+    counts: Sequence[int],
+    pool: Literal["sampling", "mean", "ours", "qem"] = "sampling",
+    depool: Literal["copy", "transpose"] = "copy",
+) -> list[
+    tuple[
+        _I64,
+        _I64,
+        _F32,
+        _I32,
+        tuple[npt.NDArray[np.float64], _I64, _I64, tuple[int, int]],
+        tuple[npt.NDArray[np.float64], _I64, _I64, tuple[int, int]],
+    ]
+]:
+    """Private (use meshvae.sampling): per step (survivors, cluster, coarse vertices, coarse
+    faces, down, up), each matrix as CSR (data, indices, indptr, shape)."""
+
 def acap_features(
     mesh_set: MeshSet,
     rest: int | str = 0,

@@ -4,7 +4,8 @@
 //! integer type `[F, 3]`, features `[..., 9]`) and paths. **Out:** numpy arrays (float32
 //! positions and features, int32 faces, int64 vertex maps), `scipy.sparse.csr_matrix` float32
 //! operators, and the classes `MeshSet`, `Simplified`, `Hierarchy`, `Normalization`,
-//! `FeatureFile`, `Model`.
+//! `FeatureFile`, `Model`,
+//! and the levels behind `meshvae.sampling` (CoMA / SpiralNet++ transform matrices).
 //!
 //! A thin layer: every computation is a call into mesh-io, qem-simplify, mesh-hierarchy,
 //! deform-features or meshvae (trained models), the same calls the `meshvae` command makes, so
@@ -22,6 +23,7 @@ mod features;
 mod hierarchy;
 mod mesh;
 mod model;
+mod sampling;
 mod simplify;
 
 use pyo3::prelude::*;
@@ -37,6 +39,7 @@ fn _meshvae(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simplify::Simplified>()?;
     m.add_function(wrap_pyfunction!(simplify::simplify, m)?)?;
     m.add_class::<hierarchy::Hierarchy>()?;
+    m.add_function(wrap_pyfunction!(sampling::sampling_levels, m)?)?;
     m.add_class::<features::Normalization>()?;
     m.add_class::<features::FeatureFile>()?;
     m.add_function(wrap_pyfunction!(features::acap_features, m)?)?;

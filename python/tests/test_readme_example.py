@@ -1,5 +1,7 @@
-"""The PyTorch example of python/README.md, run as written (from the folder holding the data
-sets). Skips, saying so, where torch is not importable: CI does not install it."""
+"""The examples of python/README.md, run as written: the PyTorch one (from the folder holding
+the data sets; skipped, saying so, where torch is not importable: CI does not install it) and
+the transform-matrices one (from a scratch folder where horse-gallop is linked, since it writes
+transform.pkl into the current folder)."""
 
 import re
 from pathlib import Path
@@ -9,15 +11,32 @@ import pytest
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
+def run_example(marker: str) -> None:
+    """Runs the README's one python block containing `marker` in the current folder."""
+    text = README.read_text()
+    blocks = list(re.finditer(r"```python\n(.*?)```", text, re.S))
+    assert len(blocks) == 2, "python/README.md should hold two python examples"
+    (block,) = [b for b in blocks if marker in b.group(1)]
+    # Padded with the lines before it, so that tracebacks give the README's line numbers.
+    code = "\n" * text[: block.start(1)].count("\n") + block.group(1)
+    exec(compile(code, str(README), "exec"), {})
+
+
 def test_pytorch_example(horse_path, monkeypatch, capsys):
     pytest.importorskip(
         "torch", reason="SKIPPED: torch is not importable, so the README's PyTorch example is not run"
     )
-    text = README.read_text()
-    blocks = list(re.finditer(r"```python\n(.*?)```", text, re.S))
-    assert len(blocks) == 1, "python/README.md should hold one python example"
-    # Padded with the lines before it, so that tracebacks give the README's line numbers.
-    code = "\n" * text[: blocks[0].start(1)].count("\n") + blocks[0].group(1)
     monkeypatch.chdir(horse_path.parent)
-    exec(compile(code, str(README), "exec"), {})
+    run_example("import torch")
     assert capsys.readouterr().out.strip() == "(8, 4216, 9) (8, 8431, 9)"
+
+
+def test_transform_matrices_example(horse_path, tmp_path, monkeypatch, capsys):
+    (tmp_path / "horse-gallop").symlink_to(horse_path, target_is_directory=True)
+    monkeypatch.chdir(tmp_path)
+    run_example("meshvae.sampling")
+    assert capsys.readouterr().out.splitlines() == [
+        "[8431, 2108, 527, 132, 33]",
+        "['adj', 'down_transform', 'face', 'up_transform', 'vertices'] (2108, 8431) 25293",
+    ]
+    assert (tmp_path / "transform.pkl").is_file()

@@ -9,6 +9,9 @@
 //! Measured against brute force over all coarse triangles: every vertex of horse-gallop and
 //! samba gets the global nearest triangle; on elephant-gallop 40 of 42,321 do not, and their
 //! closest point is at most 1e-4 of the bounding-box diagonal farther. The tests check it too.
+//! [`upsampling_global`] adds the exact search over all triangles (CoMA's AABB-tree query), for
+//! coarse meshes where the local guess is less reliable (e.g. coarse vertices kept at their
+//! survivors' positions, as CoMA's `generate_transform_matrices` keeps them).
 
 use mesh_io::{Face, Point};
 use sparse_csr::{CsrError, CsrMatrix};
@@ -31,6 +34,38 @@ pub fn upsampling(
     coarse: &[Point],
     coarse_faces: &[Face],
 ) -> Result<CsrMatrix, CsrError> {
+    upsample(fine, cluster_of, coarse, coarse_faces, false)
+}
+
+/// As [`upsampling`], but row v is on the closest of *all* coarse triangles, as CoMA's
+/// AABB-tree query: the local candidates give an upper bound on the distance, then every
+/// triangle whose bounding sphere (centroid, farthest corner) comes closer than that bound is
+/// tested exactly. Where the local candidates already hold the closest triangle the row equals
+/// [`upsampling`]'s (a farther triangle replaces the local best only when strictly closer).
+/// O(n·F) sphere tests: about 0.1 s for horse-gallop's 8,431 vertices onto 4,198 triangles.
+pub fn upsampling_global(
+    fine: &[Point],
+    cluster_of: &[u32],
+    coarse: &[Point],
+    coarse_faces: &[Face],
+) -> Result<CsrMatrix, CsrError> {
+    upsample(fine, cluster_of, coarse, coarse_faces, true)
+}
+
+fn upsample(
+    fine: &[Point],
+    cluster_of: &[u32],
+    coarse: &[Point],
+    coarse_faces: &[Face],
+    global: bool,
+) -> Result<CsrMatrix, CsrError> {
+    if cluster_of.len() != fine.len() {
+        return Err(CsrError(format!(
+            "{} cluster entries for {} fine vertices",
+            cluster_of.len(),
+            fine.len()
+        )));
+    }
     let m = coarse.len();
     let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); m];
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); m];
@@ -45,6 +80,23 @@ pub fn upsampling(
             neighbours[b as usize].push(face[k]);
         }
     }
+    // Bounding spheres (centroid, distance to the farthest corner) of the coarse triangles.
+    let spheres: Vec<([f64; 3], f64)> = if global {
+        coarse_faces
+            .iter()
+            .map(|face| {
+                let t = face.map(|i| to_f64(coarse[i as usize]));
+                let c: [f64; 3] = std::array::from_fn(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
+                let r2 = t
+                    .iter()
+                    .map(|&q| dot(sub(q, c), sub(q, c)))
+                    .fold(0.0, f64::max);
+                (c, r2.sqrt())
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let mut triplets = Vec::with_capacity(fine.len() * 3);
     let mut candidates: Vec<u32> = Vec::new();
     for (v, (p, &c)) in fine.iter().zip(cluster_of).enumerate() {
@@ -59,15 +111,30 @@ pub fn upsampling(
         }
         candidates.sort_unstable();
         candidates.dedup();
-        let best = candidates
+        let closest = |f: u32| {
+            let face = coarse_faces[f as usize];
+            let tri = face.map(|i| to_f64(coarse[i as usize]));
+            let (d2, w) = closest_on_triangle(to_f64(*p), tri);
+            (d2, face, w)
+        };
+        let mut best = candidates
             .iter()
-            .map(|&f| {
-                let face = coarse_faces[f as usize];
-                let tri = face.map(|i| to_f64(coarse[i as usize]));
-                let (d2, w) = closest_on_triangle(to_f64(*p), tri);
-                (d2, face, w)
-            })
+            .map(|&f| closest(f))
             .min_by(|a, b| a.0.total_cmp(&b.0));
+        if global {
+            let q = to_f64(*p);
+            for (f, &(centre, radius)) in spheres.iter().enumerate() {
+                let bound = best.map_or(f64::INFINITY, |b| b.0);
+                let gap = dot(sub(q, centre), sub(q, centre)).sqrt() - radius;
+                if gap > 0.0 && gap * gap >= bound {
+                    continue;
+                }
+                let found = closest(f as u32);
+                if found.0 < bound {
+                    best = Some(found);
+                }
+            }
+        }
         match best {
             Some((_, face, w)) => {
                 for k in 0..3 {
@@ -178,6 +245,69 @@ mod tests {
             }
         }
         best
+    }
+
+    /// The global search finds the closest of all triangles even when the clusters point far
+    /// away, and equals the local search where that already holds the closest.
+    #[test]
+    fn global_upsampling_finds_the_closest_triangle() {
+        let sphere = qem_simplify::shapes::icosphere(3);
+        let config = qem_simplify::SimplifyConfig {
+            target: qem_simplify::Target::Ratio(0.25),
+            lambda: 0.0,
+        };
+        let s = qem_simplify::simplify(&sphere, &config).expect("simplifies");
+        // Coarse vertices at their survivors' positions, as CoMA keeps them.
+        let coarse: Vec<Point> = s
+            .survivors
+            .iter()
+            .map(|&v| sphere.positions[v as usize])
+            .collect();
+        let faces = &s.coarse.faces;
+        let brute = |p: Point| {
+            faces
+                .iter()
+                .map(|f| closest_on_triangle(to_f64(p), f.map(|i| to_f64(coarse[i as usize]))).0)
+                .fold(f64::INFINITY, f64::min)
+        };
+        let distance2 = |up: &CsrMatrix, v: usize, p: Point| {
+            let (cols, w) = up.row(v);
+            let q: [f64; 3] = std::array::from_fn(|k| {
+                cols.iter()
+                    .zip(w)
+                    .map(|(&c, &w)| w * f64::from(coarse[c as usize][k]))
+                    .sum()
+            });
+            let d = sub(to_f64(p), q);
+            dot(d, d)
+        };
+        // Every fine vertex assigned to coarse vertex 0: the local candidates are mostly wrong.
+        let misleading = vec![0u32; sphere.vertex_count()];
+        let local = upsampling(&sphere.positions, &misleading, &coarse, faces).expect("builds");
+        let global =
+            upsampling_global(&sphere.positions, &misleading, &coarse, faces).expect("builds");
+        let mut missed = 0;
+        for (v, &p) in sphere.positions.iter().enumerate() {
+            let (cols, w) = global.row(v);
+            assert_eq!(cols.len(), 3);
+            assert!(w.iter().all(|&x| x >= 0.0) && (w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            let best = brute(p);
+            assert!((distance2(&global, v, p) - best).abs() < 1e-9, "vertex {v}");
+            missed += usize::from(distance2(&local, v, p) > best + 1e-9);
+        }
+        assert!(
+            missed > 100,
+            "the misleading clusters should defeat the local search"
+        );
+        // With the simplifier's clusters the two agree wherever the local one is exact.
+        let local = upsampling(&sphere.positions, &s.cluster_of, &coarse, faces).expect("builds");
+        let global =
+            upsampling_global(&sphere.positions, &s.cluster_of, &coarse, faces).expect("builds");
+        for (v, &p) in sphere.positions.iter().enumerate() {
+            if distance2(&local, v, p) <= brute(p) {
+                assert_eq!(local.row(v), global.row(v), "vertex {v}");
+            }
+        }
     }
 
     #[test]

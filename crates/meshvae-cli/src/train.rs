@@ -1,12 +1,13 @@
-//! `meshvae train` and `meshvae reconstruct` (`meshvae eval` is in `eval.rs`).
+//! `meshvae train`: the flags resolved over a resumed model's settings or the network's
+//! defaults, the run, and a report of how it ended.
 
 use crate::{CliError, print_warnings};
 use deform_features::FeatureOptions;
 use mesh_hierarchy::{DepoolMode, HierarchyConfig};
 use mesh_io::MeshSet;
 use meshvae::{
-    ConvKind, ModelConfig, ModelFolder, Network, Pooler, Split, Structure, TrainConfig,
-    TrainOptions, TrainRequest,
+    ConvKind, ModelConfig, ModelFolder, ModelSpec, Network, Pooler, Schedule, Split, StopReason,
+    Structure, TrainConfig, TrainOptions, TrainRequest, TrainSummary,
 };
 use std::path::{Path, PathBuf};
 
@@ -182,7 +183,7 @@ pub struct TrainArgs {
     #[arg(long)]
     quiet: bool,
     /// Train through candle's autograd instead of the hand-written CPU step (slower; the two
-    /// agree to rounding, see `meshvae::Engine`).
+    /// agree to rounding, see `meshvae::EngineExecutor`).
     #[arg(long)]
     no_engine: bool,
 }
@@ -245,82 +246,121 @@ fn refuse_ours_only_flags(args: &TrainArgs, net: Network) -> Result<(), CliError
 }
 
 pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
-    let mut set = load(&args.set)?;
+    let set = load(&args.set)?;
     let folder = ModelFolder::new(&args.out);
     // Resuming: every setting not given again comes from the model's own config.
-    let stored = if args.resume {
-        Some(folder.read_spec()?)
-    } else {
-        None
-    };
-    if let Some(path) = &args.labels {
-        let labels = mesh_io::labels::read_labels(path, set.names())?;
-        set = set.with_labels(labels)?;
-    } else if let Some(spec) = &stored {
-        // A resumed conditional model keeps the labels it was trained with (they may have come
-        // from a --labels file rather than the set).
-        if let Some(labels) = &spec.labels
-            && set.labels().is_none()
-            && set.names() == spec.names.as_slice()
-        {
-            set = set.with_labels(labels.clone())?;
-        }
-    }
+    let stored = args.resume.then(|| folder.read_spec()).transpose()?;
+    let set = attach_labels(set, args, stored.as_ref())?;
+    // --net, else the resumed model's network, else ours.
     let net = (args.net)
         .or(stored.as_ref().map(|s| s.model.net))
         .unwrap_or_default();
     refuse_ours_only_flags(args, net)?;
-    let base_model = (stored.as_ref())
+    let request = train_request(args, &set, net, stored.as_ref())?;
+    let summary = meshvae::train(&request, &train_options(args), |_| {})?;
+    report_run(&summary);
+    report_stop(&summary, request.train.schedule.patience, args);
+    report_outputs(&folder, &request.model.labels, &args.out);
+    Ok(())
+}
+
+/// The set with the labels a conditional model trains on: a --labels file's, or those a
+/// resumed model was trained with (they may have come from a --labels file rather than the
+/// set).
+fn attach_labels(
+    set: MeshSet,
+    args: &TrainArgs,
+    stored: Option<&ModelSpec>,
+) -> Result<MeshSet, CliError> {
+    if let Some(path) = &args.labels {
+        let labels = mesh_io::labels::read_labels(path, set.names())?;
+        return Ok(set.with_labels(labels)?);
+    }
+    if let Some(spec) = stored
+        && let Some(labels) = &spec.labels
+        && set.labels().is_none()
+        && set.names() == spec.names.as_slice()
+    {
+        return Ok(set.with_labels(labels.clone())?);
+    }
+    Ok(set)
+}
+
+/// What to train: the flags given, over the resumed model's settings or else `net`'s
+/// defaults.
+fn train_request<'a>(
+    args: &TrainArgs,
+    set: &'a MeshSet,
+    net: Network,
+    stored: Option<&ModelSpec>,
+) -> Result<TrainRequest<'a>, CliError> {
+    Ok(TrainRequest {
+        set,
+        model: model_config(args, set, net, stored)?,
+        train: train_config(args, net, stored),
+        features: feature_options(args, stored),
+        hierarchy: hierarchy_config(args, stored),
+        split: split_from_lists(args, set)?,
+        source: std::fs::canonicalize(&args.set).ok(),
+        out: args.out.clone(),
+    })
+}
+
+/// The network's shape: our network's flags (refused for the others before this) over the
+/// base configuration, made conditional on the set's labels if asked.
+fn model_config(
+    args: &TrainArgs,
+    set: &MeshSet,
+    net: Network,
+    stored: Option<&ModelSpec>,
+) -> Result<ModelConfig, CliError> {
+    let base = stored
         .map(|s| s.model.clone())
         .unwrap_or_else(|| ModelConfig::for_network(net));
-    let base_train = stored
-        .as_ref()
-        .map(|s| s.train.clone())
-        .unwrap_or(TrainConfig {
-            epochs: 300,
-            steps: Some(meshvae::DEFAULT_MAX_STEPS),
-            ..TrainConfig::for_network(net)
-        });
-    let base_hierarchy = stored.as_ref().map(|s| s.hierarchy).unwrap_or_default();
-    let features = stored
-        .as_ref()
-        .map(|s| s.features)
-        .unwrap_or(FeatureOptions {
-            integrable: !args.plain_features,
-            ..FeatureOptions::default()
-        });
-
     let model = ModelConfig {
         net,
-        structure: args
-            .structure
-            .clone()
-            .unwrap_or(base_model.structure.clone()),
-        conv: args.conv.unwrap_or(base_model.conv),
-        pool: args.pool.unwrap_or(base_model.pool),
-        k: args.k.unwrap_or(base_model.k),
-        latent: args.latent.unwrap_or(base_model.latent),
-        channels: args.channels.unwrap_or(base_model.channels),
-        batch_norm: base_model.batch_norm && !args.no_batch_norm,
-        last_encoder_linear: base_model.last_encoder_linear && !args.last_encoder_tanh,
-        ..base_model
+        structure: args.structure.clone().unwrap_or(base.structure.clone()),
+        conv: args.conv.unwrap_or(base.conv),
+        pool: args.pool.unwrap_or(base.pool),
+        k: args.k.unwrap_or(base.k),
+        latent: args.latent.unwrap_or(base.latent),
+        channels: args.channels.unwrap_or(base.channels),
+        batch_norm: base.batch_norm && !args.no_batch_norm,
+        last_encoder_linear: base.last_encoder_linear && !args.last_encoder_tanh,
+        ..base
     };
-    let model = if args.labels.is_some() || args.conditional {
-        let labels = set.labels().ok_or_else(|| {
-            CliError::argument(
-                "--conditional",
-                format!(
-                    "{} has no labels (no labels.csv beside its meshes); pass --labels FILE",
-                    args.set.display()
-                ),
-            )
-        })?;
-        model.conditional_on(labels)
-    } else {
-        model
-    };
-    let conditional = model.labels.clone();
-    let mut train = base_train.clone();
+    if args.labels.is_none() && !args.conditional {
+        return Ok(model);
+    }
+    let labels = set.labels().ok_or_else(|| {
+        CliError::argument(
+            "--conditional",
+            format!(
+                "{} has no labels (no labels.csv beside its meshes); pass --labels FILE",
+                args.set.display()
+            ),
+        )
+    })?;
+    Ok(model.conditional_on(labels))
+}
+
+/// The training settings given, over the resumed model's, or else `net`'s defaults with the
+/// command's own budget.
+fn train_config(args: &TrainArgs, net: Network, stored: Option<&ModelSpec>) -> TrainConfig {
+    let mut train = stored.map(|s| s.train.clone()).unwrap_or(TrainConfig {
+        epochs: 300,
+        steps: Some(meshvae::DEFAULT_MAX_STEPS),
+        ..TrainConfig::for_network(net)
+    });
+    set_budget(&mut train, args);
+    set_schedule(&mut train.schedule, args);
+    set_step(&mut train, args);
+    set_data(&mut train, args);
+    train
+}
+
+/// --epochs replaces the step budget; --steps alone keeps the epochs as they were.
+fn set_budget(train: &mut TrainConfig, args: &TrainArgs) {
     match (args.epochs, args.steps) {
         (Some(epochs), _) => {
             train.epochs = epochs;
@@ -329,81 +369,94 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         (None, Some(steps)) => train.steps = Some(steps),
         (None, None) => {}
     }
-    train.normalize_on_all = base_train.normalize_on_all || args.normalize_on_all;
-    train.normalize_quantile = args
-        .normalize_quantile
-        .unwrap_or(base_train.normalize_quantile);
+}
+
+/// Warm-up, decay, plateau cuts, stopping and how often the validation loss is measured.
+fn set_schedule(schedule: &mut Schedule, args: &TrainArgs) {
     if let Some(p) = args.patience {
-        train.schedule.patience = p;
+        schedule.patience = p;
     }
     if let Some(x) = args.min_improvement {
-        train.schedule.min_improvement = x;
+        schedule.min_improvement = x;
     }
     if let Some(p) = args.lr_patience {
-        train.schedule.lr_patience = p;
+        schedule.lr_patience = p;
     }
     if let Some(n) = args.smoothing {
-        train.schedule.smoothing_steps = n;
+        schedule.smoothing_steps = n;
     }
     if let Some(w) = args.warmup {
-        train.schedule.warmup_steps = w;
+        schedule.warmup_steps = w;
     }
     if let Some(d) = args.decay {
-        train.schedule.decay_steps = d;
-    }
-    if let Some(k) = args.clip {
-        train.grad_clip = k;
+        schedule.decay_steps = d;
     }
     if let Some(n) = args.validate_every {
-        train.schedule.validate_every_steps = n;
+        schedule.validate_every_steps = n;
     }
+}
+
+/// What one step does: its batch, the loss weights and Adam's settings.
+fn set_step(train: &mut TrainConfig, args: &TrainArgs) {
+    train.lr = args.lr.unwrap_or(train.lr);
+    train.batch = args.batch.unwrap_or(train.batch);
     if let Some(b) = args.beta2 {
         train.adam_beta2 = b;
     }
     if let Some(x) = args.head_lr_scale {
         train.head_lr_scale = x;
     }
-    train.seed = args.seed.unwrap_or(base_train.seed);
-    train.batch = args.batch.unwrap_or(base_train.batch);
-    train.lr = args.lr.unwrap_or(base_train.lr);
-    train.val_fraction = args.val_fraction.unwrap_or(base_train.val_fraction);
-    train.split_by_shape = !args.split_by_mesh && base_train.split_by_shape;
+    if let Some(k) = args.clip {
+        train.grad_clip = k;
+    }
     if let Some([rec, kl, l2]) = args.loss_weights {
         train.loss.rec = rec;
         train.loss.kl = kl;
         train.loss.l2 = l2;
     }
-    let hierarchy = HierarchyConfig {
-        depool: args.depool.unwrap_or(base_hierarchy.depool),
-        ..base_hierarchy
+}
+
+/// The seed, the split's rules and the feature normalisation.
+fn set_data(train: &mut TrainConfig, args: &TrainArgs) {
+    train.seed = args.seed.unwrap_or(train.seed);
+    train.val_fraction = args.val_fraction.unwrap_or(train.val_fraction);
+    train.split_by_shape = !args.split_by_mesh && train.split_by_shape;
+    train.normalize_on_all = train.normalize_on_all || args.normalize_on_all;
+    train.normalize_quantile = args.normalize_quantile.unwrap_or(train.normalize_quantile);
+}
+
+/// A resumed model keeps its features (--plain-features applies to new models only).
+fn feature_options(args: &TrainArgs, stored: Option<&ModelSpec>) -> FeatureOptions {
+    stored.map(|s| s.features).unwrap_or(FeatureOptions {
+        integrable: !args.plain_features,
+        ..FeatureOptions::default()
+    })
+}
+
+fn hierarchy_config(args: &TrainArgs, stored: Option<&ModelSpec>) -> HierarchyConfig {
+    let base = stored.map(|s| s.hierarchy).unwrap_or_default();
+    HierarchyConfig {
+        depool: args.depool.unwrap_or(base.depool),
+        ..base
+    }
+}
+
+/// The split the --train-list, --test-list (and --val-list) files give; `None` lets training
+/// draw one from the seed.
+fn split_from_lists(args: &TrainArgs, set: &MeshSet) -> Result<Option<Split>, CliError> {
+    let (Some(train), Some(test)) = (&args.train_list, &args.test_list) else {
+        return Ok(None);
     };
-    let split = match (&args.train_list, &args.test_list) {
-        (Some(a), Some(b)) => {
-            let val = match &args.val_list {
-                Some(v) => read_list(v)?,
-                None => Vec::new(),
-            };
-            Some(Split::from_names(
-                set.names(),
-                &read_list(a)?,
-                &val,
-                &read_list(b)?,
-            )?)
-        }
-        _ => None,
+    let val = match &args.val_list {
+        Some(v) => read_list(v)?,
+        None => Vec::new(),
     };
-    let source = std::fs::canonicalize(&args.set).ok();
-    let request = TrainRequest {
-        set: &set,
-        source,
-        out: args.out.clone(),
-        model,
-        train,
-        features,
-        hierarchy,
-        split,
-    };
-    let options = TrainOptions {
+    let split = Split::from_names(set.names(), &read_list(train)?, &val, &read_list(test)?)?;
+    Ok(Some(split))
+}
+
+fn train_options(args: &TrainArgs) -> TrainOptions {
+    TrainOptions {
         resume: args.resume,
         force: args.force,
         progress: !args.quiet,
@@ -419,8 +472,11 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         device: meshvae::default_device(),
         engine: !args.no_engine,
         ..TrainOptions::default()
-    };
-    let summary = meshvae::train(&request, &options, |_| {})?;
+    }
+}
+
+/// How long the run trained, how far it got, its best epoch and what computed its steps.
+fn report_run(summary: &TrainSummary) {
     let done = summary
         .last
         .as_ref()
@@ -442,11 +498,16 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     if let Some(executor) = &summary.executor {
         out!("steps computed by: {executor}");
     }
+}
+
+/// Why the run stopped. A budget that cut the loss while it still improved is a warning that
+/// says how to continue.
+fn report_stop(summary: &TrainSummary, patience: usize, args: &TrainArgs) {
     match summary.stop_reason {
-        meshvae::StopReason::Converged => out!(
+        StopReason::Converged => out!(
             "stopped: converged (no new best {} loss for {} steps; learning rate now {:.2e})",
             summary.selected_on,
-            request.train.schedule.patience,
+            patience,
             summary.lr
         ),
         _ if summary.still_improving => eprintln!(
@@ -460,13 +521,17 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         ),
         _ => out!("stopped: budget (the loss had stopped improving)"),
     }
-    match crate::loss_plot::write_loss_plot(&folder) {
+}
+
+/// The loss plot (a failure to draw it only warns: the model is written), a conditional
+/// model's labels and where the model is.
+fn report_outputs(folder: &ModelFolder, labels: &[String], model_dir: &Path) {
+    match crate::loss_plot::write_loss_plot(folder) {
         Ok(path) => out!("loss curves: {}", path.display()),
         Err(e) => eprintln!("warning: no loss.png: {e}"),
     }
-    if !conditional.is_empty() {
-        out!("conditional on the labels {}", conditional.join(", "));
+    if !labels.is_empty() {
+        out!("conditional on the labels {}", labels.join(", "));
     }
-    out!("model: {}", args.out.display());
-    Ok(())
+    out!("model: {}", model_dir.display());
 }

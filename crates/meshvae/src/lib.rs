@@ -10,10 +10,10 @@
 //! convolutions from `spectral-conv`, pooling by edge contraction) → training with Adam,
 //! a learning-rate schedule, early stopping on the validation loss ([`Schedule`]; a run says
 //! why it stopped, [`StopReason`]), checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
-//! backward over reused buffers ([`Engine`], checked against candle's autograd) when it
-//! supports the model (every CPU model with K ≤ 8), and candle's autograd otherwise; which one
-//! ran, and why candle where it did, is said in the log, `run.json` and the summary
-//! ([`Executor`]). The applications' encoding and decoding run on the same engine on the CPU
+//! backward over reused buffers ([`EngineExecutor`], checked against candle's autograd,
+//! [`CandleExecutor`]) when it supports the model (every CPU model of ours with K ≤ 8), and
+//! candle's autograd otherwise; both implement [`Executor`], and which one ran, and why candle
+//! where it did, is said in the log, `run.json` and the summary ([`ExecutorChoice`]). The applications' encoding and decoding run on the same engine on the CPU
 //! ([`TrainedModel::reconstruct_batch`]). Both executors are built from one network
 //! description (`net/plan.rs`). A conditional model
 //! (`ModelConfig::labels`) also takes each mesh's label (see `candle/model/cond.rs`); generation,
@@ -66,6 +66,7 @@ mod apps;
 mod candle;
 mod cpu;
 mod error;
+mod executor;
 mod net;
 mod numerics;
 mod optim;
@@ -88,8 +89,12 @@ pub use net::structure::{Layer, Structure};
 pub use candle::batch_norm::{BatchNorm, Mode};
 pub use candle::model::{Encoded, MeshVae};
 
-// The hand-written CPU training step (`cpu/`).
-pub use cpu::{Engine, StepLoss};
+// The executors (`executor/`): the hand-written CPU engine (`cpu/`) and candle's autograd.
+pub use cpu::StepLoss;
+pub use executor::{
+    Batch, CandleExecutor, EngineExecutor, Executor, ExecutorChoice, ExecutorKind, StepReport,
+    TrainStep, default_device,
+};
 
 // Training (`train/`): the loop, its optimiser, losses, schedule, data, split and checkpoints.
 pub use optim::adam::{Adam, AdamConfig, GradClip};
@@ -105,9 +110,8 @@ pub use train::scaling::{InputScaling, PositionScaling};
 pub use train::schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
 pub use train::split::{Selection, Split, resolve_mesh};
 pub use train::{
-    EpochRecord, Executor, ExecutorKind, PhaseSeconds, RunStatus, SPIKE_FACTOR, SPIKE_WINDOW,
-    TrainOptions, TrainRequest, TrainSummary, default_device, hierarchy_config, loss_spikes,
-    read_log, read_status, train, validation_loss,
+    EpochRecord, PhaseSeconds, RunStatus, SPIKE_FACTOR, SPIKE_WINDOW, TrainOptions, TrainRequest,
+    TrainSummary, hierarchy_config, loss_spikes, read_log, read_status, train, validation_loss,
 };
 
 // A trained model folder loaded for use (`trained.rs`).

@@ -2,15 +2,15 @@
 //! everything around it (hierarchy, normalisation, split, template). The applications (`apps/`)
 //! work on it. The folder's layout and the files a run writes are in `train/folder.rs`.
 
-use crate::candle::batch_norm::Mode;
 use crate::candle::model::MeshVae;
-use crate::cpu::Engine;
 use crate::error::{Result, VaeError};
+use crate::executor::{
+    Batch, CandleExecutor, EngineExecutor, Executor, ExecutorChoice, ExecutorKind,
+};
 use crate::net::network::Input;
 use crate::train::folder::{ModelFolder, ModelSpec, SplitFile};
 use crate::train::scaling::InputScaling;
 use crate::train::split::{Selection, Split};
-use crate::train::{Executor, ExecutorKind};
 use candle_core::Device;
 use candle_core::Tensor;
 use mesh_hierarchy::Hierarchy;
@@ -33,7 +33,7 @@ pub struct TrainedModel {
     pub selected_on: Selection,
     /// The CPU engine that encodes and decodes for the applications, built on first use where
     /// it covers the model (see [`TrainedModel::reconstruct_batch`]).
-    engine: Mutex<Option<Engine>>,
+    engine: Mutex<Option<EngineExecutor>>,
 }
 
 impl TrainedModel {
@@ -138,8 +138,8 @@ impl TrainedModel {
     /// What encodes and decodes for the applications ([`Self::reconstruct_batch`],
     /// [`Self::encode_mu`], [`Self::decode_batch`]): the CPU engine where it covers the model,
     /// else candle's model, with the reason (the CLI prints it).
-    pub fn inference_executor(&self) -> Executor {
-        Executor::choose(&self.model, true)
+    pub fn inference_executor(&self) -> ExecutorChoice {
+        ExecutorChoice::choose(&self.model, true)
     }
 
     /// The one-hot labels `[B, L]` of the meshes `ids` of the model's set for a conditional
@@ -180,45 +180,37 @@ impl TrainedModel {
     /// decode(μ(x, c), c) for features x `[B, V, 9]` (labels c `[B, L]` for a conditional
     /// model).
     pub fn reconstruct_batch(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        match self.with_engine(x.dim(0)?, |e, m| e.reconstruct(m, x, c)) {
-            Some(done) => done,
-            None => self.model.reconstruct(x, c),
-        }
+        self.with_executor(x.dim(0)?, |e, m| e.reconstruct(m, Batch { x, c }))
     }
 
     /// The encoder means μ `[B, latent]` of features x `[B, V, 9]`.
     pub fn encode_mu(&self, x: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        match self.with_engine(x.dim(0)?, |e, m| e.encode(m, x, c)) {
-            Some(done) => done.map(|(mu, _)| mu),
-            None => Ok(self.model.encode(x, c, Mode::Eval)?.mu),
-        }
+        self.with_executor(x.dim(0)?, |e, m| e.encode(m, Batch { x, c }))
+            .map(|(mu, _)| mu)
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]`.
     pub fn decode_batch(&self, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
-        match self.with_engine(z.dim(0)?, |e, m| e.decode(m, z, c)) {
-            Some(done) => done,
-            None => self.model.decode(z, c, Mode::Eval),
-        }
+        self.with_executor(z.dim(0)?, |e, m| e.decode(m, Batch { x: z, c }))
     }
 
-    /// Runs `f` on the engine (built on first use, rebuilt for a larger batch); `None` where
-    /// the engine does not cover the model.
-    fn with_engine<R>(
+    /// Runs `f` on the inference executor: the engine (built on first use, rebuilt for a
+    /// larger batch) where it covers the model, candle's model otherwise.
+    fn with_executor<R>(
         &self,
         batch: usize,
-        f: impl FnOnce(&mut Engine, &MeshVae) -> Result<R>,
-    ) -> Option<Result<R>> {
+        f: impl FnOnce(&mut dyn Executor, &MeshVae) -> Result<R>,
+    ) -> Result<R> {
         if self.inference_executor().kind != ExecutorKind::Engine {
-            return None;
+            return f(&mut CandleExecutor, &self.model);
         }
         let mut slot = self.engine.lock().unwrap_or_else(|p| p.into_inner());
         if slot.as_ref().is_none_or(|e| e.max_batch() < batch) {
-            match Engine::new(&self.model, batch.max(1)) {
-                Ok(engine) => *slot = Some(engine),
-                Err(e) => return Some(Err(e)),
-            }
+            *slot = Some(EngineExecutor::new(&self.model, batch.max(1))?);
         }
-        slot.as_mut().map(|engine| f(engine, &self.model))
+        match slot.as_mut() {
+            Some(engine) => f(engine, &self.model),
+            None => f(&mut CandleExecutor, &self.model),
+        }
     }
 }

@@ -443,5 +443,4 @@ impl MaxKernel {
 }
 
 #[cfg(test)]
-#[path = "buffers_tests.rs"]
 mod tests;

@@ -20,6 +20,8 @@
 mod backward;
 mod clenshaw;
 mod forward;
+#[cfg(test)]
+mod tests;
 mod weights;
 
 use crate::kernel::{Csr, Real};

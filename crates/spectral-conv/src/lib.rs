@@ -71,8 +71,6 @@
 mod buffers;
 mod cheb;
 mod cheb_kernel;
-#[cfg(test)]
-mod cheb_kernel_tests;
 mod cheb_op;
 mod check;
 mod custom_op;
@@ -88,9 +86,10 @@ mod spatial;
 mod spmm;
 #[cfg(test)]
 mod test_util;
-mod transpose;
+// The layers' vertex-major entry points against their `[B, V, C]` forms (every layer at once).
 #[cfg(test)]
-mod vertex_major_tests;
+mod tests;
+mod transpose;
 mod workspace;
 
 pub use buffers::{ChebKernel, ConvDims, Float, MaxKernel, SparseKernel};

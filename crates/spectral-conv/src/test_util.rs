@@ -213,41 +213,46 @@ pub fn weighted_sum(y: &Tensor, seed: u64) -> candle_core::Result<Tensor> {
     (y * r)?.sum_all()
 }
 
-#[test]
-fn helper_operators_match_their_definitions() {
-    // Two triangles 0-1-2, 0-2-3 and an isolated vertex 4.
-    let a = adjacency(5, &[[0, 1, 2], [0, 2, 3]]).to_dense();
-    assert_eq!(a[0], vec![0.0, 1.0, 1.0, 1.0, 0.0]);
-    assert_eq!(a[1], vec![1.0, 0.0, 1.0, 0.0, 0.0]);
-    assert_eq!(a[4], vec![0.0; 5]);
-    let deg: Vec<f64> = a.iter().map(|r| r.iter().sum()).collect();
-    let l = normalized_laplacian(&adjacency(5, &[[0, 1, 2], [0, 2, 3]])).to_dense();
-    let lt = mesh_laplacian(5, &[[0, 1, 2], [0, 2, 3]]).to_dense();
-    for i in 0..5 {
-        for j in 0..5 {
-            let eye = if i == j { 1.0 } else { 0.0 };
-            let off = if a[i][j] == 0.0 {
-                0.0
-            } else {
-                a[i][j] / (deg[i] * deg[j]).sqrt()
-            };
-            assert!((l[i][j] - (eye - off)).abs() < 1e-15);
-            assert!((lt[i][j] + off).abs() < 1e-15);
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn helper_operators_match_their_definitions() {
+        // Two triangles 0-1-2, 0-2-3 and an isolated vertex 4.
+        let a = adjacency(5, &[[0, 1, 2], [0, 2, 3]]).to_dense();
+        assert_eq!(a[0], vec![0.0, 1.0, 1.0, 1.0, 0.0]);
+        assert_eq!(a[1], vec![1.0, 0.0, 1.0, 0.0, 0.0]);
+        assert_eq!(a[4], vec![0.0; 5]);
+        let deg: Vec<f64> = a.iter().map(|r| r.iter().sum()).collect();
+        let l = normalized_laplacian(&adjacency(5, &[[0, 1, 2], [0, 2, 3]])).to_dense();
+        let lt = mesh_laplacian(5, &[[0, 1, 2], [0, 2, 3]]).to_dense();
+        for i in 0..5 {
+            for j in 0..5 {
+                let eye = if i == j { 1.0 } else { 0.0 };
+                let off = if a[i][j] == 0.0 {
+                    0.0
+                } else {
+                    a[i][j] / (deg[i] * deg[j]).sqrt()
+                };
+                assert!((l[i][j] - (eye - off)).abs() < 1e-15);
+                assert!((lt[i][j] + off).abs() < 1e-15);
+            }
         }
+        // A strip 0-1-2-3 over 4-5-6-7; coarse 0 = survivor 2 with cluster {2, 3, 7}, coarse 1 =
+        // survivor 4 with {0, 1, 4}, coarse 2 = survivor 5 with {5, 6}.
+        let faces = [
+            [0, 4, 5],
+            [0, 5, 1],
+            [1, 5, 6],
+            [1, 6, 2],
+            [2, 6, 7],
+            [2, 7, 3],
+        ];
+        let m = neighbourhoods(&faces, &[2, 4, 5], &[1, 1, 0, 0, 1, 2, 2, 0]);
+        assert_eq!(m.row(0).0, [1, 2, 3, 6, 7]);
+        assert_eq!(m.row(1).0, [0, 1, 4, 5]);
+        assert_eq!(m.row(2).0, [0, 1, 4, 5, 6]);
+        assert!(m.values().iter().all(|&v| v == 1.0));
     }
-    // A strip 0-1-2-3 over 4-5-6-7; coarse 0 = survivor 2 with cluster {2, 3, 7}, coarse 1 =
-    // survivor 4 with {0, 1, 4}, coarse 2 = survivor 5 with {5, 6}.
-    let faces = [
-        [0, 4, 5],
-        [0, 5, 1],
-        [1, 5, 6],
-        [1, 6, 2],
-        [2, 6, 7],
-        [2, 7, 3],
-    ];
-    let m = neighbourhoods(&faces, &[2, 4, 5], &[1, 1, 0, 0, 1, 2, 2, 0]);
-    assert_eq!(m.row(0).0, [1, 2, 3, 6, 7]);
-    assert_eq!(m.row(1).0, [0, 1, 4, 5]);
-    assert_eq!(m.row(2).0, [0, 1, 4, 5, 6]);
-    assert!(m.values().iter().all(|&v| v == 1.0));
 }

@@ -231,6 +231,7 @@ pub fn loop_measure(points: &[[f64; 2]]) -> Result<LoopMeasure> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::apps::fixture;
 
     fn circle(n: usize) -> Vec<[f64; 2]> {
         (0..n)
@@ -289,12 +290,6 @@ mod tests {
         assert!((var[1] - 2.0 / 3.0).abs() < 1e-9);
         assert_eq!(largest_variance_dims(&[vec![1.0], vec![2.0]]).0, [0, 0]);
     }
-}
-
-#[cfg(test)]
-mod model_tests {
-    use super::*;
-    use crate::apps::generate::fixture;
 
     #[test]
     fn embeddings_of_the_synthetic_set() {

@@ -67,15 +67,12 @@ fn widen(p: &Point) -> [f64; 3] {
 
 /// Errors of `reconstructed[i]` against `truth[i]` for every i. Empty input gives zeros.
 pub fn error_report(truth: &[&[Point]], reconstructed: &[Vec<[f64; 3]>]) -> Result<ErrorReport> {
+    let mismatch = |what: String| VaeError::shape("error_report", what);
     if truth.len() != reconstructed.len() {
-        return Err(VaeError::shape(
-            "error_report",
-            format!(
-                "{} ground-truth meshes but {} reconstructions",
-                truth.len(),
-                reconstructed.len()
-            ),
-        ));
+        let (t, r) = (truth.len(), reconstructed.len());
+        return Err(mismatch(format!(
+            "{t} ground-truth meshes but {r} reconstructions"
+        )));
     }
     let mut sum_sq = 0.0;
     let mut sum_dist = 0.0;
@@ -83,14 +80,10 @@ pub fn error_report(truth: &[&[Point]], reconstructed: &[Vec<[f64; 3]>]) -> Resu
     let mut count = 0usize;
     for (i, (t, r)) in truth.iter().zip(reconstructed).enumerate() {
         if t.len() != r.len() {
-            return Err(VaeError::shape(
-                "error_report",
-                format!(
-                    "mesh {i}: {} vertices in the ground truth, {} reconstructed",
-                    t.len(),
-                    r.len()
-                ),
-            ));
+            let (nt, nr) = (t.len(), r.len());
+            return Err(mismatch(format!(
+                "mesh {i}: {nt} vertices in the ground truth, {nr} reconstructed"
+            )));
         }
         let ct = centroid(t.iter().map(widen));
         let cr = centroid(r.iter().copied());

@@ -86,7 +86,7 @@ pub fn interpolate(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::apps::generate::fixture;
+    use crate::apps::fixture;
 
     #[test]
     fn endpoints_are_the_reconstructions_of_the_two_meshes() {

@@ -5,6 +5,8 @@
 
 pub(crate) mod embed;
 pub(crate) mod eval;
+#[cfg(test)]
+pub(crate) mod fixture;
 pub(crate) mod generate;
 pub(crate) mod interpolate;
 pub(crate) mod quality;

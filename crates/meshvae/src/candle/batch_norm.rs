@@ -6,6 +6,7 @@
 //! the running statistics: r ← 0.9·r + 0.1·batch. Eval mode uses the running statistics.
 
 use crate::error::{Result, VaeError};
+use crate::net::batch_norm::{inv_std, running_update};
 use candle_core::{DType, Tensor, Var};
 
 /// Train mode: batch norm uses (and updates the running statistics from) the batch.
@@ -119,10 +120,7 @@ impl BatchNorm {
             ),
         };
         // scale = γ / √(v + ε), so y = (x − m)·scale + β with one broadcast multiply.
-        let scale = (var + Self::EPS)?
-            .sqrt()?
-            .recip()?
-            .broadcast_mul(&self.gamma.as_tensor().unsqueeze(0)?)?;
+        let scale = inv_std(&var)?.broadcast_mul(&self.gamma.as_tensor().unsqueeze(0)?)?;
         Ok(flat
             .broadcast_sub(&mean)?
             .broadcast_mul(&scale)?
@@ -132,7 +130,7 @@ impl BatchNorm {
     fn update_running(&self, mean: &Tensor, var: &Tensor) -> Result<()> {
         let blend = |running: &Var, batch: &Tensor| -> Result<()> {
             let batch = batch.detach().squeeze(0)?;
-            let next = ((running.as_tensor() * Self::DECAY)? + (batch * (1.0 - Self::DECAY))?)?;
+            let next = running_update(running.as_tensor(), &batch)?;
             running.set(&next)?;
             Ok(())
         };

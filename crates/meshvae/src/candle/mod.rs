@@ -6,4 +6,5 @@
 
 pub(crate) mod baseline;
 pub(crate) mod batch_norm;
+mod elementwise;
 pub(crate) mod model;

@@ -22,6 +22,7 @@ use crate::candle::batch_norm::Mode;
 use crate::error::{Result, VaeError};
 use crate::net::baseline::BaselinePlan;
 use crate::net::config::ModelConfig;
+use crate::net::latent::sigma_of_sigmoid;
 use crate::net::network::Input;
 use crate::net::params::ParamCount;
 use crate::net::plan::NetPlan;
@@ -43,7 +44,7 @@ pub struct Encoded {
 /// σ = √(2·sigmoid(s)) ∈ (0, √2) of the σ head's pre-activation s (the authors' form, for every
 /// VAE here).
 pub(crate) fn sigma_head(s: &Tensor) -> Result<Tensor> {
-    Ok((candle_nn::ops::sigmoid(s)? * 2.0)?.sqrt()?)
+    Ok(sigma_of_sigmoid(&candle_nn::ops::sigmoid(s)?)?)
 }
 
 /// The mesh VAE on one hierarchy: the paper's network, or one of the others it is compared with

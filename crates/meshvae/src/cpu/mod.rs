@@ -19,27 +19,32 @@
 //! over overlapping member lists, remeshing is mean pooling) and the conditional VAE's labels
 //! ([`Engine::forward_backward`]), in f32 or f64 on the CPU; [`Engine::unsupported`] says why
 //! anything else is declined, and training then uses candle's path, which stays the reference
-//! (`tests.rs` compares the two).
+//! (`executor/engine/tests.rs` compares the two).
 //!
-//! This folder holds the engine (here), its network of layers over reused buffers (`net.rs`;
-//! `net/`: built from the model's network plan (`net::plan::NetPlan`: the layer list and
-//! variable ids candle's model is built from too), per-layer forward and backward, convolution weights,
-//! the latent heads, inference), its element-wise kernels (`kernels.rs`), the matrix products (`gemm.rs`) and
-//! [`wide`](wide::wide) (AVX2 + FMA loops, also used by Adam's update). It imports `train/` only
-//! for the [`Adam`] it steps and the [`LossWeights`] it reads.
+//! The engine knows no tensor library: it reads a model through [`EngineModel`] (its plan,
+//! configuration and variables, lent in place as host slices) and takes and returns host arrays
+//! (`numerics/host.rs`). `executor/engine.rs` puts candle's model and tensors in that form.
+//!
+//! This folder holds the engine (here), what it needs of a model (`model.rs`), its network of
+//! layers over reused buffers (`net.rs`; `net/`: built from the model's network plan
+//! (`net::plan::NetPlan`: the layer list and variable ids candle's model is built from too),
+//! per-layer forward and backward, convolution weights, the latent heads, inference), its
+//! element-wise kernels (`kernels.rs`) and the matrix products (`gemm.rs`). Below it: the
+//! shared formulas (`net/`), [`Adam`] (`optim/`), which it steps, and the float types and wide
+//! loops (`numerics/`).
 
 mod gemm;
 mod kernels;
+pub(crate) mod model;
 mod net;
-#[cfg(test)]
-mod tests;
 
-use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
 use crate::net::loss_weights::LossWeights;
+use crate::numerics::host::{HostArray, HostTensor, Precision};
 use crate::optim::adam::Adam;
-use candle_core::{DType, Tensor};
-use net::{Inputs, Net};
+use model::EngineModel;
+pub(crate) use net::Inputs;
+use net::Net;
 
 pub(crate) use crate::numerics::real::Real;
 
@@ -65,6 +70,9 @@ pub struct StepLoss {
     pub kl: f64,
 }
 
+/// μ and σ `[B, latent]`.
+pub(crate) type Latents = (HostTensor, HostTensor);
+
 #[derive(Debug)]
 enum Typed {
     F32(Net<f32>),
@@ -83,22 +91,19 @@ macro_rules! on_net {
 
 /// The hand-written training step of one model (see the module documentation).
 #[derive(Debug)]
-pub struct Engine {
+pub(crate) struct Engine {
     net: Typed,
 }
 
 impl Engine {
     /// Why the engine cannot train `model`, or `None` if it can.
-    pub fn unsupported(model: &MeshVae) -> Option<String> {
+    pub fn unsupported(model: &dyn EngineModel) -> Option<String> {
         let c = model.config();
         if !c.net.is_ours() {
             return Some(format!("the network {} (it runs ours only)", c.net));
         }
-        if !model.device().is_cpu() {
-            return Some("the model is not on the CPU".into());
-        }
-        if !matches!(model.dtype(), DType::F32 | DType::F64) {
-            return Some(format!("dtype {:?}", model.dtype()));
+        if let Err(why) = model.precision() {
+            return Some(why);
         }
         if c.k > 8 {
             return Some(format!("K = {} (at most 8)", c.k));
@@ -108,8 +113,8 @@ impl Engine {
 
     /// An engine for `model` with buffers for batches of up to `max_batch` meshes; an error
     /// saying why when [`Self::unsupported`] declines the model (training asks first and says
-    /// which path it takes, `crate::Executor`).
-    pub fn new(model: &MeshVae, max_batch: usize) -> Result<Self> {
+    /// which path it takes, `crate::ExecutorChoice`).
+    pub fn new(model: &dyn EngineModel, max_batch: usize) -> Result<Self> {
         if let Some(why) = Self::unsupported(model) {
             return Err(VaeError::argument(
                 "model",
@@ -119,69 +124,65 @@ impl Engine {
         if max_batch == 0 {
             return Err(VaeError::argument("max_batch", "must be at least 1"));
         }
-        let net = match model.dtype() {
-            DType::F32 => Typed::F32(Net::build(model, max_batch)?),
+        let net = match model.precision() {
+            Ok(Precision::F32) => Typed::F32(Net::build(model, max_batch)?),
             _ => Typed::F64(Net::build(model, max_batch)?),
         };
         Ok(Self { net })
     }
 
-    /// Forward and backward pass on features x `[B, V, 9]` (labels c `[B, L]`, one-hot rows as
-    /// [`MeshVae::one_hot`] makes them, exactly for a conditional model) and noise ε
-    /// `[B, latent]` (the model's dtype, CPU) in train mode: updates the batch norms' running
-    /// statistics as the candle path does and leaves every trainable variable's gradient (of
-    /// w_rec·rec + w_kl·KL, without the L2 term) in the engine.
+    /// Forward and backward pass on features x `[B, V, 9]` (labels c `[B, L]`, one-hot rows,
+    /// exactly for a conditional model) and noise ε `[B, latent]` (the model's float type) in
+    /// train mode: updates the batch norms' running statistics as candle's batch norm does and
+    /// leaves every trainable variable's gradient (of w_rec·rec + w_kl·KL, without the L2
+    /// term) in the engine.
     pub fn forward_backward(
         &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-        eps: &Tensor,
+        model: &dyn EngineModel,
+        inputs: Inputs<'_>,
+        eps: HostArray<'_>,
         weights: &LossWeights,
     ) -> Result<StepLoss> {
-        on_net!(&mut self.net, n => n.step(model, Inputs { x, c }, (eps, weights)))
+        on_net!(&mut self.net, n => n.step(model, inputs, (eps, weights)))
     }
 
     /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]` (labels c exactly for a
-    /// conditional model) in inference mode (z = μ, the batch norms' running statistics):
-    /// [`MeshVae::rec_error`] without candle's per-op allocations. Does not disturb the last
-    /// [`Self::forward_backward`]'s gradients.
+    /// conditional model) in inference mode (z = μ, the batch norms' running statistics). Does
+    /// not disturb the last [`Self::forward_backward`]'s gradients.
     pub fn rec_error(
         &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
+        model: &dyn EngineModel,
+        inputs: Inputs<'_>,
         weights: &LossWeights,
     ) -> Result<f64> {
-        on_net!(&mut self.net, n => n.rec_error(model, Inputs { x, c }, weights))
+        on_net!(&mut self.net, n => n.rec_error(model, inputs, weights))
     }
 
     /// μ and σ `[B, latent]` of features x `[B, V, 9]` in inference mode (the batch norms'
-    /// running statistics; labels c `[B, L]` exactly when the model is conditional), as
-    /// [`MeshVae::encode`] in eval mode computes them.
-    pub fn encode(
-        &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-    ) -> Result<(Tensor, Tensor)> {
-        on_net!(&mut self.net, n => n.encode(model, Inputs { x, c }))
+    /// running statistics; labels c `[B, L]` exactly when the model is conditional).
+    pub fn encode(&mut self, model: &dyn EngineModel, inputs: Inputs<'_>) -> Result<Latents> {
+        on_net!(&mut self.net, n => n.encode(model, inputs))
     }
 
-    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` in inference mode, as
-    /// [`MeshVae::decode`] in eval mode.
-    pub fn decode(&mut self, model: &MeshVae, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+    /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` in inference mode.
+    pub fn decode(
+        &mut self,
+        model: &dyn EngineModel,
+        z: HostArray<'_>,
+        c: Option<HostArray<'_>>,
+    ) -> Result<HostTensor> {
         on_net!(&mut self.net, n => n.decode(model, z, c))
     }
 
-    /// decode(μ(x, c), c) in inference mode, as [`MeshVae::reconstruct`].
-    pub fn reconstruct(
-        &mut self,
-        model: &MeshVae,
-        x: &Tensor,
-        c: Option<&Tensor>,
-    ) -> Result<Tensor> {
-        on_net!(&mut self.net, n => n.reconstruct(model, Inputs { x, c }))
+    /// decode(μ(x, c), c) in inference mode.
+    pub fn reconstruct(&mut self, model: &dyn EngineModel, x: Inputs<'_>) -> Result<HostTensor> {
+        on_net!(&mut self.net, n => n.reconstruct(model, x))
+    }
+
+    /// Whether the full-resolution vertices run renumbered (for the tests).
+    #[cfg(test)]
+    pub fn renumbered(&self) -> bool {
+        on_net!(&self.net, n => n.renumbered())
     }
 
     /// The largest batch the engine's buffers hold.
@@ -191,8 +192,8 @@ impl Engine {
 
     /// Adam's update from the gradients of the last [`Self::forward_backward`] plus the L2
     /// term's gradient `l2 · θ` (as `Adam::step_with_l2`); returns the L2 term's value
-    /// l2 · Σ ½‖θ‖² of the weights before the update. `adam` must be built on
-    /// `model.trainable_vars()`.
+    /// l2 · Σ ½‖θ‖² of the weights before the update. `adam` must be built on the model's
+    /// trainable variables.
     pub fn apply_adam(&self, adam: &mut Adam, l2: f64) -> Result<f64> {
         let half_sq = on_net!(&self.net, n => n.apply_adam(adam, l2)?);
         Ok(half_sq * l2)
@@ -204,8 +205,8 @@ impl Engine {
         on_net!(&self.net, n => n.grad_norm())
     }
 
-    /// Copies of the last step's gradients, by variable name (for checks and tests).
-    pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
+    /// The last step's gradients in f64, by variable name (for checks and tests).
+    pub fn gradients(&self) -> Vec<(String, Vec<f64>)> {
         on_net!(&self.net, n => n.gradients())
     }
 }

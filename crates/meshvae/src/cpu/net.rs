@@ -1,14 +1,14 @@
 //! The engine's network: its layer list, buffers, forward and backward passes (see `mod.rs`).
 
 use super::kernels as k;
+use super::model::EngineModel;
 use super::{Real, StepLoss, f64_of, of};
-use crate::candle::model::MeshVae;
 use crate::error::{Result, VaeError};
 use crate::net::batch_norm as bn;
 use crate::net::config::FEATURE_CHANNELS;
 use crate::net::loss_weights::LossWeights;
+use crate::numerics::host::{HostArray, HostSlice};
 use crate::optim::adam::{Adam, GradSource};
-use candle_core::{Layout, Storage, Tensor, Var};
 use spectral_conv::{ChebKernel, MaxKernel, SparseKernel, Workspace};
 use std::sync::Arc;
 
@@ -21,26 +21,19 @@ mod node;
 use conv_weight::ConvWeight;
 use node::{BnStats, backward_node, forward_node};
 
-/// A batch norm's variables (indices into the trainable list) and its last batch statistics.
+/// A batch norm's variables (indices into the trainable and the state lists), its last batch
+/// statistics and, for inference, the running ones read from the model.
 #[derive(Debug)]
 struct Bn {
     gamma: usize,
     beta: usize,
-    running_mean: Var,
-    running_var: Var,
+    running_mean: usize,
+    running_var: usize,
     mean: Vec<f64>,
     var: Vec<f64>,
     inv_std: Vec<f64>,
-}
-
-impl Bn {
-    /// The running mean and variance, as inference normalises with them.
-    fn running_stats(&self) -> Result<(Vec<f64>, Vec<f64>)> {
-        let read = |v: &Var| -> Result<Vec<f64>> {
-            Ok(v.as_tensor().to_dtype(candle_core::DType::F64)?.to_vec1()?)
-        };
-        Ok((read(&self.running_mean)?, read(&self.running_var)?))
-    }
+    /// The running mean and variance as of the last inference pass.
+    running: (Vec<f64>, Vec<f64>),
 }
 
 /// conv → [batch norm] → [tanh]. Buffers are indices into [`Acts`]; `pre` (the convolution's
@@ -126,9 +119,9 @@ struct LabelVars {
 /// One batch handed to the network: features x `[B, V, 9]` and, exactly when the model is
 /// conditional, one-hot labels c `[B, L]`.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Inputs<'a> {
-    pub x: &'a Tensor,
-    pub c: Option<&'a Tensor>,
+pub(crate) struct Inputs<'a> {
+    pub x: HostArray<'a>,
+    pub c: Option<HostArray<'a>>,
 }
 
 /// Activation buffers, each sized for the largest batch.
@@ -168,7 +161,10 @@ struct Latent<T> {
 #[derive(Debug)]
 pub(super) struct Net<T> {
     names: Vec<String>,
-    vars: Vec<Var>,
+    /// The trainable variables' identities (see [`EngineModel::var_ids`]).
+    var_ids: Vec<u64>,
+    /// The trainable variables' element counts.
+    lens: Vec<usize>,
     grads: Vec<Vec<T>>,
     max_batch: usize,
     v0: usize,
@@ -203,34 +199,28 @@ fn internal(what: impl Into<String>) -> VaeError {
     VaeError::shape("Engine", what.into())
 }
 
-/// The contiguous data of a CPU storage of type `T`.
-fn cpu_slice<'a, T: Real>(s: &'a Storage, l: &Layout, what: &str) -> Result<&'a [T]> {
-    let Storage::Cpu(cpu) = s else {
-        return Err(internal(format!("{what} is not on the CPU")));
-    };
-    let data = T::cpu(cpu).ok_or_else(|| internal(format!("{what} has another dtype")))?;
-    let (lo, hi) = l
-        .contiguous_offsets()
-        .ok_or_else(|| internal(format!("{what} is not contiguous")))?;
-    Ok(&data[lo..hi])
+/// The values of `data` as `T` (the engine's own float type).
+fn host<'a, T: Real>(data: HostSlice<'a>, what: &str) -> Result<&'a [T]> {
+    T::host(data).ok_or_else(|| internal(format!("{what} has another float type")))
 }
 
-/// Runs `f` on the CPU data of the model's variables (read-locked meanwhile).
+/// Runs `f` on the model's trainable variables, read in place.
 fn with_weights<T: Real, R>(
-    vars: &[Var],
-    names: &[String],
+    model: &dyn EngineModel,
     f: impl FnOnce(&[&[T]]) -> Result<R>,
 ) -> Result<R> {
-    let guards: Vec<_> = vars
-        .iter()
-        .map(|v| v.as_tensor().storage_and_layout())
-        .collect();
-    let w: Vec<&[T]> = guards
-        .iter()
-        .zip(names)
-        .map(|((s, l), name)| cpu_slice::<T>(s, l, name))
-        .collect::<Result<_>>()?;
-    f(&w)
+    let mut f = Some(f);
+    let mut out = None;
+    model.with_weights(&mut |slices| {
+        let w: Vec<&[T]> = (slices.iter())
+            .map(|&s| host::<T>(s, "a weight"))
+            .collect::<Result<_>>()?;
+        if let Some(f) = f.take() {
+            out = Some(f(&w)?);
+        }
+        Ok(())
+    })?;
+    out.ok_or_else(|| internal("the model did not lend its weights"))
 }
 
 impl<T: Real> Net<T> {
@@ -238,13 +228,9 @@ impl<T: Real> Net<T> {
         self.max_batch
     }
 
-    fn check_model(&self, model: &MeshVae) -> Result<()> {
+    fn check_model(&self, model: &dyn EngineModel) -> Result<()> {
         // The same variables, not only the same shapes: the engine reads them in place.
-        let vars = model.trainable_vars();
-        let same = vars.len() == self.vars.len()
-            && (vars.iter().zip(&self.vars))
-                .all(|((_, a), b)| a.as_tensor().id() == b.as_tensor().id());
-        if model.vertex_count() != self.v0 || !same {
+        if model.vertex_count() != self.v0 || model.var_ids() != self.var_ids {
             return Err(internal(
                 "the model is not the one the engine was built for",
             ));
@@ -252,11 +238,16 @@ impl<T: Real> Net<T> {
         Ok(())
     }
 
-    /// Checks the inputs' shapes and copies them into the engine's buffers; returns B.
-    fn load_inputs(&mut self, Inputs { x, c }: Inputs<'_>, eps: &Tensor) -> Result<usize> {
-        let dims = x.dims();
-        let batch = match dims {
-            &[b, v, c] if b >= 1 && v == self.v0 && c == FEATURE_CHANNELS => b,
+    /// Checks the inputs' shapes and copies them into the engine's buffers (ε = 0 where not
+    /// given: z = μ); returns B.
+    fn load_inputs(
+        &mut self,
+        Inputs { x, c }: Inputs<'_>,
+        eps: Option<HostArray<'_>>,
+    ) -> Result<usize> {
+        let dims = x.dims;
+        let batch = match *dims {
+            [b, v, c] if b >= 1 && v == self.v0 && c == FEATURE_CHANNELS => b,
             _ => {
                 return Err(VaeError::shape(
                     "Engine::forward_backward",
@@ -267,36 +258,45 @@ impl<T: Real> Net<T> {
                 ));
             }
         };
-        if batch > self.max_batch || eps.dims() != [batch, self.latent] {
+        let expected = [batch, self.latent];
+        let eps_dims: &[usize] = eps.map_or(&expected, |e| e.dims);
+        if batch > self.max_batch || eps_dims != [batch, self.latent] {
             return Err(VaeError::shape(
                 "Engine::forward_backward",
                 format!(
-                    "batch of {batch} (at most {}), ε of shape {:?} (expected [{batch}, {}])",
-                    self.max_batch,
-                    eps.dims(),
-                    self.latent
+                    "batch of {batch} (at most {}), ε of shape {eps_dims:?} (expected [{batch}, {}])",
+                    self.max_batch, self.latent
                 ),
             ));
         }
-        let (x, eps) = (x.contiguous()?, eps.contiguous()?);
-        let (xs, xl) = x.storage_and_layout();
-        let xd = cpu_slice::<T>(&xs, xl, "the features")?;
+        let xd = host::<T>(x.data, "the features")?;
         let n = self.v0 * FEATURE_CHANNELS * batch;
+        if xd.len() != n {
+            return Err(internal("the features' values do not fill their shape"));
+        }
         k::to_vcb(
             xd,
             &mut self.acts.0[self.x_buf][..n],
             (batch, self.v0, FEATURE_CHANNELS),
             self.order.as_deref(),
         );
-        let (es, el) = eps.storage_and_layout();
-        let ed = cpu_slice::<T>(&es, el, "ε")?;
-        self.lat.eps[..ed.len()].copy_from_slice(ed);
+        let eps_len = batch * self.latent;
+        match eps {
+            Some(e) => {
+                let ed = host::<T>(e.data, "ε")?;
+                if ed.len() != eps_len {
+                    return Err(internal("ε's values do not fill its shape"));
+                }
+                self.lat.eps[..eps_len].copy_from_slice(ed);
+            }
+            None => self.lat.eps[..eps_len].fill(of(0.0)),
+        }
         self.load_labels(c, batch)?;
         Ok(batch)
     }
 
     /// Copies the one-hot labels `[B, L]`, given exactly when the model is conditional.
-    fn load_labels(&mut self, c: Option<&Tensor>, batch: usize) -> Result<()> {
+    fn load_labels(&mut self, c: Option<HostArray<'_>>, batch: usize) -> Result<()> {
         const OP: &str = "Engine::forward_backward";
         match (c, self.dense.labels) {
             (None, None) => Ok(()),
@@ -309,19 +309,19 @@ impl<T: Real> Net<T> {
                 format!("{OP}: the model is conditional; give each mesh's label"),
             )),
             (Some(c), Some(labels)) => {
-                if c.dims() != [batch, labels.count] {
+                if c.dims != [batch, labels.count] {
                     return Err(VaeError::shape(
                         OP,
                         format!(
                             "labels of shape {:?}; expected [{batch}, {}]",
-                            c.dims(),
-                            labels.count
+                            c.dims, labels.count
                         ),
                     ));
                 }
-                let c = c.contiguous()?;
-                let (cs, cl) = c.storage_and_layout();
-                let cd = cpu_slice::<T>(&cs, cl, "the labels")?;
+                let cd = host::<T>(c.data, "the labels")?;
+                if cd.len() != batch * labels.count {
+                    return Err(internal("the labels' values do not fill their shape"));
+                }
                 self.cond[..cd.len()].copy_from_slice(cd);
                 Ok(())
             }
@@ -330,20 +330,19 @@ impl<T: Real> Net<T> {
 
     pub fn step(
         &mut self,
-        model: &MeshVae,
+        model: &dyn EngineModel,
         inputs: Inputs<'_>,
-        (eps, weights): (&Tensor, &LossWeights),
+        (eps, weights): (HostArray<'_>, &LossWeights),
     ) -> Result<StepLoss> {
         self.check_model(model)?;
-        let batch = self.load_inputs(inputs, eps)?;
-        let (vars, names) = (self.vars.clone(), self.names.clone());
-        let loss = with_weights(&vars, &names, |w| {
+        let batch = self.load_inputs(inputs, Some(eps))?;
+        let loss = with_weights(model, |w| {
             let loss = self.forward(w, batch, weights)?;
             self.backward(w, batch, weights)?;
             Ok(loss)
         })?;
         self.batch = batch;
-        self.update_running_stats()?;
+        self.update_running_stats(model)?;
         Ok(loss)
     }
 
@@ -405,23 +404,29 @@ impl<T: Real> Net<T> {
     }
 
     /// r ← 0.9·r + 0.1·batch for every batch norm (as candle's batch norm in train mode).
-    fn update_running_stats(&self) -> Result<()> {
+    fn update_running_stats(&self, model: &dyn EngineModel) -> Result<()> {
         for node in self.enc.iter().chain(&self.dec) {
             let Node::Conv(Conv { bn: Some(bn), .. }) = node else {
                 continue;
             };
-            for (running, batch) in [(&bn.running_mean, &bn.mean), (&bn.running_var, &bn.var)] {
-                let old: Vec<f64> = running
-                    .as_tensor()
-                    .to_dtype(candle_core::DType::F64)?
-                    .to_vec1()?;
-                let next: Vec<f64> = old
-                    .iter()
-                    .zip(batch)
-                    .map(|(r, b)| bn::DECAY * r + (1.0 - bn::DECAY) * b)
+            for (running, batch) in [(bn.running_mean, &bn.mean), (bn.running_var, &bn.var)] {
+                let next: Vec<f64> = (model.state(running)?.iter().zip(batch))
+                    .map(|(r, b)| {
+                        let Ok(next) = bn::running_update(r, b);
+                        next
+                    })
                     .collect();
-                let t = Tensor::from_vec(next, old.len(), running.device())?;
-                running.set(&t.to_dtype(running.dtype())?)?;
+                model.set_state(running, &next)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads every batch norm's running statistics from the model, for inference.
+    fn load_running_stats(&mut self, model: &dyn EngineModel) -> Result<()> {
+        for node in self.enc.iter_mut().chain(&mut self.dec) {
+            if let Node::Conv(Conv { bn: Some(bn), .. }) = node {
+                bn.running = (model.state(bn.running_mean)?, model.state(bn.running_var)?);
             }
         }
         Ok(())
@@ -480,28 +485,22 @@ impl<T: Real> Net<T> {
         (rest + self.dense_grad_sq()).sqrt()
     }
 
-    pub fn gradients(&self) -> Result<Vec<(String, Tensor)>> {
-        self.names
-            .iter()
-            .zip(&self.vars)
-            .zip(&self.grads)
+    /// The last step's gradients in f64, by variable name.
+    pub fn gradients(&self) -> Vec<(String, Vec<f64>)> {
+        (self.names.iter().zip(&self.lens).zip(&self.grads))
             .enumerate()
-            .map(|(i, ((n, v), g))| {
+            .map(|(i, ((n, &len), g))| {
                 let dense = [self.dense.w_mu, self.dense.w_sigma].contains(&i);
-                let made;
-                let g = if dense {
-                    let mut all = vec![of(0.0); v.elem_count()];
+                let values = if dense {
+                    let mut all = vec![of::<T>(0.0); len];
                     if self.batch > 0 {
                         self.dense_grad_rows(i, 0, &mut all);
                     }
-                    made = all;
-                    &made
+                    all.iter().map(|&x| f64_of(x)).collect()
                 } else {
-                    g
+                    g.iter().map(|&x| f64_of(x)).collect()
                 };
-                let values: Vec<f64> = g.iter().map(|&x| f64_of(x)).collect();
-                let t = Tensor::from_vec(values, v.shape(), v.device())?.to_dtype(v.dtype())?;
-                Ok((n.clone(), t))
+                (n.clone(), values)
             })
             .collect()
     }

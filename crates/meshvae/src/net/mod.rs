@@ -7,6 +7,7 @@
 pub(crate) mod baseline;
 pub(crate) mod batch_norm;
 pub(crate) mod config;
+pub(crate) mod elementwise;
 pub(crate) mod latent;
 pub(crate) mod loss_weights;
 pub(crate) mod network;

@@ -1,6 +1,7 @@
 //! [`Real`]: the float types (f32, f64) the CPU kernels run on (the engine's passes, Adam's
 //! update), with the f32 tanh they use, and the slices of candle's CPU storages they read.
 
+use super::host::{HostSlice, HostVec};
 use candle_core::{CpuStorage, Layout};
 use candle_core::{Result, Tensor, bail};
 
@@ -31,62 +32,61 @@ pub(crate) trait Real:
     /// The values of a CPU storage of this type.
     fn cpu(s: &CpuStorage) -> Option<&[Self]>;
     fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]>;
+    /// The values of a host slice of this type.
+    fn host(s: HostSlice<'_>) -> Option<&[Self]>;
+    /// Values of this type as a host vector.
+    fn host_vec(v: Vec<Self>) -> HostVec;
+}
+
+/// The parts of [`Real`] that differ between f32 and f64 only by name.
+macro_rules! real_storage {
+    ($t:ty, $v:ident) => {
+        const DTYPE_OF: candle_core::DType = candle_core::DType::$v;
+        fn host(s: HostSlice<'_>) -> Option<&[Self]> {
+            match s {
+                HostSlice::$v(v) => Some(v),
+                _ => None,
+            }
+        }
+        fn host_vec(v: Vec<Self>) -> HostVec {
+            HostVec::$v(v)
+        }
+        fn cpu(s: &CpuStorage) -> Option<&[Self]> {
+            match s {
+                CpuStorage::$v(v) => Some(v),
+                _ => None,
+            }
+        }
+        fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]> {
+            match s {
+                CpuStorage::$v(v) => Some(v),
+                _ => None,
+            }
+        }
+        fn as_f64(self) -> f64 {
+            self as f64
+        }
+        fn of(x: f64) -> Self {
+            x as $t
+        }
+        fn sqrt(self) -> Self {
+            <$t>::sqrt(self)
+        }
+    };
 }
 
 impl Real for f32 {
-    const DTYPE_OF: candle_core::DType = candle_core::DType::F32;
-    fn cpu(s: &CpuStorage) -> Option<&[Self]> {
-        match s {
-            CpuStorage::F32(v) => Some(v),
-            _ => None,
-        }
-    }
-    fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]> {
-        match s {
-            CpuStorage::F32(v) => Some(v),
-            _ => None,
-        }
-    }
-    fn as_f64(self) -> f64 {
-        self as f64
-    }
-    fn of(x: f64) -> Self {
-        x as f32
-    }
+    real_storage!(f32, F32);
     #[inline(always)]
     fn tanh(self) -> Self {
         fast_tanh(self)
     }
-    fn sqrt(self) -> Self {
-        f32::sqrt(self)
-    }
 }
 
 impl Real for f64 {
-    const DTYPE_OF: candle_core::DType = candle_core::DType::F64;
-    fn cpu(s: &CpuStorage) -> Option<&[Self]> {
-        match s {
-            CpuStorage::F64(v) => Some(v),
-            _ => None,
-        }
-    }
-    fn cpu_mut(s: &mut CpuStorage) -> Option<&mut [Self]> {
-        match s {
-            CpuStorage::F64(v) => Some(v),
-            _ => None,
-        }
-    }
-    fn as_f64(self) -> f64 {
-        self
-    }
-    fn of(x: f64) -> Self {
-        x
-    }
+    real_storage!(f64, F64);
     fn tanh(self) -> Self {
         f64::tanh(self)
-    }
-    fn sqrt(self) -> Self {
-        f64::sqrt(self)
     }
 }
 

@@ -35,7 +35,7 @@ pub struct EpochRecord {
     pub since_best: Option<u64>,
     /// What computed the epoch's steps (absent from older logs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub executor: Option<super::ExecutorKind>,
+    pub executor: Option<crate::executor::ExecutorKind>,
     /// Why candle computed them rather than the engine.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub executor_reason: Option<String>,

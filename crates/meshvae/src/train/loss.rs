@@ -31,7 +31,7 @@
 use crate::candle::batch_norm::Mode;
 use crate::candle::model::{Encoded, MeshVae};
 use crate::error::Result;
-use crate::net::latent::KL_VAR_EPS;
+use crate::net::latent::kl_unit;
 pub use crate::net::loss_weights::LossWeights;
 use crate::net::network::RecLoss;
 use candle_core::{DType, Tensor};
@@ -76,8 +76,8 @@ fn rec_term(x: &Tensor, x_hat: &Tensor, kind: RecLoss) -> Result<Tensor> {
 fn mean_kl(e: &Encoded) -> Result<Tensor> {
     let batch = e.mu.dim(0)? as f64;
     let var = e.sigma.sqr()?;
-    let terms = ((e.mu.sqr()? + &var)? - (var + KL_VAR_EPS)?.log()?)?;
-    Ok((((terms - 1.0)?.sum_all()? * 0.5)? / batch)?)
+    let terms = kl_unit(&e.mu, &var)?;
+    Ok(((terms.sum_all()? * 0.5)? / batch)?)
 }
 
 impl MeshVae {

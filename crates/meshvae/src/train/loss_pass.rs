@@ -2,13 +2,13 @@
 
 use crate::candle::model::MeshVae;
 use crate::error::Result;
+use crate::executor::{Batch, Executor};
 use crate::train::data::MeshData;
 use crate::train::loss::LossWeights;
 use candle_core::Device;
 
 /// w_rec · mean over `ids` of the reconstruction error with z = μ (inference mode), or `None`
-/// without meshes; through `engine` if given (it must be the model's: the same error without
-/// candle's per-op allocations).
+/// without meshes, computed by `executor` (the model's).
 pub fn validation_loss(
     model: &MeshVae,
     data: &MeshData,
@@ -16,7 +16,7 @@ pub fn validation_loss(
     batch: usize,
     weights: &LossWeights,
     device: &Device,
-    mut engine: Option<&mut crate::cpu::Engine>,
+    executor: &mut dyn Executor,
 ) -> Result<Option<f64>> {
     if ids.is_empty() {
         return Ok(None);
@@ -25,10 +25,11 @@ pub fn validation_loss(
     for chunk in ids.chunks(batch.max(1)) {
         let x = data.batch(chunk, device)?;
         let c = data.conditions(model, chunk)?;
-        let error = match engine.as_deref_mut() {
-            Some(engine) => engine.rec_error(model, &x, c.as_ref(), weights)?,
-            None => model.rec_error(&x, c.as_ref(), weights)?,
+        let batch = Batch {
+            x: &x,
+            c: c.as_ref(),
         };
+        let error = executor.rec_error(model, batch, weights)?;
         sum += error * chunk.len() as f64;
     }
     Ok(Some(sum / ids.len() as f64))

@@ -24,7 +24,7 @@
 //! any model.
 //!
 //! This folder: the epoch loop (`trainer.rs`; request and summary in `request.rs`), the saved settings
-//! (`config.rs`), Adam (`adam.rs`, `adam/`), losses, schedule, data, split, the files a run
+//! (`config.rs`), losses, schedule, data, split, the files a run
 //! writes (`folder.rs`, `checkpoint.rs`, `epoch_log.rs`, `status.rs`) and the loop's helpers.
 
 use crate::error::Result;
@@ -36,7 +36,6 @@ pub(crate) mod checkpoint;
 pub(crate) mod config;
 pub(crate) mod data;
 mod epoch_log;
-mod executor;
 pub(crate) mod folder;
 pub(crate) mod loss;
 mod loss_pass;
@@ -51,7 +50,6 @@ mod status;
 mod trainer;
 
 pub use epoch_log::{EpochRecord, SPIKE_FACTOR, SPIKE_WINDOW, loss_spikes, read_log};
-pub use executor::{Executor, ExecutorKind, default_device};
 pub use loss_pass::validation_loss;
 pub use phases::PhaseSeconds;
 pub use request::{TrainOptions, TrainRequest, TrainSummary, hierarchy_config};

@@ -1,8 +1,9 @@
 //! What [`train`](super::train) is asked ([`TrainRequest`]: the set and the settings;
 //! [`TrainOptions`]: how to run) and what it returns ([`TrainSummary`]).
 
+use super::EpochRecord;
 use super::config::TrainConfig;
-use super::{EpochRecord, Executor};
+use crate::executor::ExecutorChoice;
 use crate::net::config::ModelConfig;
 use crate::train::schedule::StopReason;
 use crate::train::split::{Selection, Split};
@@ -59,7 +60,7 @@ pub struct TrainOptions {
     /// much as a third of the step, so measuring it every epoch would slow training by that.
     pub test_every_steps: usize,
     pub device: Device,
-    /// Train with the hand-written CPU step ([`crate::Engine`]) whenever it supports the model;
+    /// Train with the hand-written CPU step ([`crate::EngineExecutor`]) whenever it supports the model;
     /// `false` forces candle's autograd path (the reference).
     pub engine: bool,
     /// Tests only: the loss of this optimizer step (counted from 1) is taken as non-finite,
@@ -82,7 +83,7 @@ impl Default for TrainOptions {
             best_in_memory_params: 16 << 20,
             keep_selected_on_test: false,
             test_every_steps: 10,
-            device: super::default_device(),
+            device: crate::executor::default_device(),
             engine: true,
             fail_step: None,
             fail_after_rollback: false,
@@ -116,7 +117,7 @@ pub struct TrainSummary {
     pub selected_on: Selection,
     pub seconds: f64,
     /// What computed this call's steps (`None` when it ran none).
-    pub executor: Option<Executor>,
+    pub executor: Option<ExecutorChoice>,
 }
 
 /// The hierarchy settings a model configuration needs: `base` (the user's λmax and

@@ -8,7 +8,6 @@ use super::bar::progress_bar;
 use super::best::BestState;
 use super::checkpoint::{Checkpoint, Progress};
 use super::epoch_log::{EpochRecord, read_log, truncate_log};
-use super::executor::{Executor, ExecutorKind};
 use super::folder::{ModelFolder, ModelSpec};
 use super::loss_pass::validation_loss;
 use super::phases::PhaseSeconds;
@@ -19,12 +18,12 @@ use super::setup::{fresh_setup, resume_setup, write_model_files};
 use super::status::{RunStatus, read_status};
 use super::stream_seed;
 use crate::candle::model::MeshVae;
-use crate::cpu::Engine;
 use crate::error::Result;
+use crate::executor::{Batch, Executor, ExecutorChoice, TrainStep};
 use crate::numerics::rng::Rng;
 use crate::optim::adam::Adam;
 use crate::train::data::MeshData;
-use candle_core::{DType, Tensor};
+use candle_core::Tensor;
 use indicatif::ProgressBar;
 use mesh_hierarchy::Hierarchy;
 use std::collections::BTreeMap;
@@ -56,7 +55,7 @@ pub(super) struct Trainer<'a> {
     base_lr: f64,
     /// Which path trains, and why candle where it is candle: said on every line of
     /// `log.jsonl`, in `run.json` and in the summary.
-    executor: Executor,
+    choice: ExecutorChoice,
     phases: PhaseSeconds,
     prior_seconds: f64,
     /// The best weights (and state) kept in memory until the next write, for small models.
@@ -64,8 +63,8 @@ pub(super) struct Trainer<'a> {
     best_on_test: Option<BTreeMap<String, Tensor>>,
     keep_in_memory: bool,
     keep_selected_on_test: bool,
-    /// A small model's engine, kept from one epoch to the next.
-    kept_engine: Option<Engine>,
+    /// A small model's executor (the engine's buffers), kept from one epoch to the next.
+    kept: Option<Box<dyn Executor>>,
     last_write: Instant,
     stop: StopReason,
     /// False between a rollback and the next epoch that finishes: a divergence then means the
@@ -143,7 +142,7 @@ impl<'a> Trainer<'a> {
         }
         let steps_per_epoch = data.split.train.len().div_ceil(spec.train.batch);
         let epochs = spec.train.epoch_budget(steps_per_epoch);
-        let executor = Executor::choose(&model, options.engine);
+        let choice = ExecutorChoice::choose(&model, options.engine);
         let keep_in_memory = model.param_count().with_biases <= options.best_in_memory_params;
         // A resumed run goes on keeping them if it kept them before (or its file would go
         // stale).
@@ -167,13 +166,13 @@ impl<'a> Trainer<'a> {
             ended,
             epochs,
             steps_per_epoch,
-            executor,
+            choice,
             phases: PhaseSeconds::default(),
             best: None,
             best_on_test: None,
             keep_in_memory,
             keep_selected_on_test,
-            kept_engine: None,
+            kept: None,
             last_write: Instant::now(),
             stop: StopReason::Budget,
             trained_since_rollback: true,
@@ -239,18 +238,18 @@ impl<'a> Trainer<'a> {
         while epoch <= self.epochs {
             let started = Instant::now();
             let steps_before = self.adam.step_count();
-            let mut engine = self.take_engine()?;
-            let (sums, mut divergence) = self.train_epoch(epoch, engine.as_mut(), &bar)?;
+            let mut executor = self.take_executor()?;
+            let (sums, mut divergence) = self.train_epoch(epoch, executor.as_mut(), &bar)?;
             // Without validation meshes the score is the training loss, free to look at.
             let looked_at = epoch == self.epochs
                 || self.data.split.val.is_empty()
                 || (self.schedule).validation_due(steps_before, self.adam.step_count());
             let mut val_loss = None;
             if divergence.is_none() && looked_at {
-                (val_loss, divergence) = self.look(epoch, engine.as_mut())?;
+                (val_loss, divergence) = self.look(epoch, executor.as_mut())?;
             }
             if let Some(what) = divergence {
-                drop(engine);
+                drop(executor);
                 if let Err(e) = self.recover(what, &bar) {
                     bar.abandon();
                     return Err(e);
@@ -266,7 +265,7 @@ impl<'a> Trainer<'a> {
                 val_loss,
                 looked_at,
             };
-            let (record, finished) = self.end_epoch(steps, engine)?;
+            let (record, finished) = self.end_epoch(steps, executor)?;
             bar.set_message(self.bar_message(&record));
             on_epoch(&record);
             last = Some(record);
@@ -285,18 +284,15 @@ impl<'a> Trainer<'a> {
         (self.progress.schedule).lr(&self.schedule, self.base_lr, step)
     }
 
-    /// This epoch's engine, if the engine trains. A large model's engine is built per epoch
-    /// and dropped before validation and checkpoints, so that its buffers (~0.6 GB on
-    /// elephant-gallop at batch 16) never coexist with a checkpoint's copies; a small one's is
-    /// kept (building it and touching fresh pages cost ~10 % of a horse-gallop epoch).
-    fn take_engine(&mut self) -> Result<Option<Engine>> {
-        Ok(match self.kept_engine.take() {
-            Some(engine) => Some(engine),
-            None if self.executor.kind == ExecutorKind::Engine => {
-                Some(Engine::new(&self.model, self.spec.train.batch)?)
-            }
-            None => None,
-        })
+    /// This epoch's executor. A large model's engine is built per epoch and dropped before
+    /// validation and checkpoints, so that its buffers (~0.6 GB on elephant-gallop at batch
+    /// 16) never coexist with a checkpoint's copies; a small one's is kept (building it and
+    /// touching fresh pages cost ~10 % of a horse-gallop epoch).
+    fn take_executor(&mut self) -> Result<Box<dyn Executor>> {
+        match self.kept.take() {
+            Some(executor) => Ok(executor),
+            None => self.choice.build(&self.model, self.spec.train.batch),
+        }
     }
 
     /// One pass over the shuffled training meshes: the losses summed over its meshes, and the
@@ -304,7 +300,7 @@ impl<'a> Trainer<'a> {
     fn train_epoch(
         &mut self,
         epoch: usize,
-        mut engine: Option<&mut Engine>,
+        executor: &mut dyn Executor,
         bar: &ProgressBar,
     ) -> Result<([f64; 4], Option<String>)> {
         let mut order = self.data.split.train.clone();
@@ -312,7 +308,7 @@ impl<'a> Trainer<'a> {
         let mut sums = [0.0f64; 4];
         for chunk in order.chunks(self.spec.train.batch) {
             self.adam.set_lr(self.lr_at(self.adam.step_count() + 1))?;
-            match self.step(epoch, chunk, engine.as_deref_mut())? {
+            match self.step(epoch, chunk, executor)? {
                 Ok(losses) => {
                     let w = chunk.len() as f64;
                     for (s, v) in sums.iter_mut().zip(losses) {
@@ -326,12 +322,12 @@ impl<'a> Trainer<'a> {
         Ok((sums, None))
     }
 
-    /// One Adam step on the meshes `chunk`, through the engine if given.
+    /// One Adam step on the meshes `chunk`.
     fn step(
         &mut self,
         epoch: usize,
         chunk: &[usize],
-        engine: Option<&mut Engine>,
+        executor: &mut dyn Executor,
     ) -> Result<StepOutcome> {
         let device = &self.options.device;
         let (x, c, eps) = self.phases.time(
@@ -345,11 +341,6 @@ impl<'a> Trainer<'a> {
             },
         )?;
         let step = self.adam.step_count() + 1;
-        let diverged = |total: f64, rec: f64, kl: f64, l2: f64| {
-            Err(format!(
-                "epoch {epoch} (step {step}): the loss is {total} (rec {rec}, kl {kl}, l2 {l2})"
-            ))
-        };
         let injected = match self.progress.schedule.rollbacks {
             0 => self.options.fail_step == Some(step),
             1 => self.options.fail_after_rollback && !self.trained_since_rollback,
@@ -358,51 +349,32 @@ impl<'a> Trainer<'a> {
         if injected {
             return Ok(Err(format!("epoch {epoch}: the loss is NaN (injected)")));
         }
-        let loss = &self.spec.train.loss;
-        let w_l2 = loss.l2;
-        let Some(engine) = engine else {
-            // The L2 term's gradient is applied by Adam (see `MeshVae::training_loss`).
-            let t = Instant::now();
-            let l = self.model.training_loss(&x, c.as_ref(), &eps, loss)?;
-            let total = l.total.to_dtype(DType::F64)?.to_scalar::<f64>()? + l.l2;
-            if !total.is_finite() {
-                return Ok(diverged(total, l.rec, l.kl, l.l2));
-            }
-            let grads = self.model.backward(&l.total)?;
-            self.phases.forward_backward += t.elapsed().as_secs_f64();
-            let adam = &mut self.adam;
-            self.phases
-                .time(|p| &mut p.adam, || adam.step_with_l2(&grads, w_l2))?;
-            return Ok(Ok([total, l.rec, l.kl, l.l2]));
+        let step_inputs = TrainStep {
+            batch: Batch {
+                x: &x,
+                c: c.as_ref(),
+            },
+            eps: &eps,
+            adam: &mut self.adam,
+            loss: &self.spec.train.loss,
         };
-        let model = &self.model;
-        let l = self.phases.time(
-            |p| &mut p.forward_backward,
-            || engine.forward_backward(model, &x, c.as_ref(), &eps, loss),
-        )?;
-        if !(l.rec + l.kl).is_finite() {
-            let l2 = model.l2_term()?.to_dtype(DType::F64)?.to_scalar::<f64>()? * w_l2;
-            return Ok(diverged(l.rec + l.kl + l2, l.rec, l.kl, l2));
+        let r = executor.step(&self.model, step_inputs)?;
+        self.phases.forward_backward += r.forward_backward_seconds;
+        self.phases.adam += r.update_seconds;
+        if !r.finite {
+            let (total, rec, kl, l2) = (r.total, r.rec, r.kl, r.l2);
+            return Ok(Err(format!(
+                "epoch {epoch} (step {step}): the loss is {total} (rec {rec}, kl {kl}, l2 {l2})"
+            )));
         }
-        // Adam also returns the L2 term of the weights it started from.
-        let adam = &mut self.adam;
-        let l2 = self
-            .phases
-            .time(|p| &mut p.adam, || engine.apply_adam(adam, w_l2))?;
-        let total = l.rec + l.kl + l2;
-        if !total.is_finite() {
-            return Ok(diverged(total, l.rec, l.kl, l2));
-        }
-        Ok(Ok([total, l.rec, l.kl, l2]))
+        Ok(Ok(r.terms()))
     }
 
-    /// The loss on `ids` in inference mode: it reads the weights and changes nothing. The
-    /// engine, where there is one, computes the same error without candle's per-op
-    /// allocations.
-    fn loss_on(&self, ids: &[usize], engine: Option<&mut Engine>) -> Result<Option<f64>> {
+    /// The loss on `ids` in inference mode: it reads the weights and changes nothing.
+    fn loss_on(&self, ids: &[usize], executor: &mut dyn Executor) -> Result<Option<f64>> {
         let (batch, loss) = (self.spec.train.batch, &self.spec.train.loss);
         let device = &self.options.device;
-        validation_loss(&self.model, &self.data, ids, batch, loss, device, engine)
+        validation_loss(&self.model, &self.data, ids, batch, loss, device, executor)
     }
 
     /// The look at the validation loss after an epoch: the loss, and the divergence it shows,
@@ -410,10 +382,10 @@ impl<'a> Trainer<'a> {
     fn look(
         &mut self,
         epoch: usize,
-        engine: Option<&mut Engine>,
+        executor: &mut dyn Executor,
     ) -> Result<(Option<f64>, Option<String>)> {
         let t = Instant::now();
-        let val_loss = self.loss_on(&self.data.split.val, engine)?;
+        let val_loss = self.loss_on(&self.data.split.val, executor)?;
         self.phases.validation += t.elapsed().as_secs_f64();
         // The last step can leave non-finite weights behind a finite training loss.
         if let Some(v) = val_loss.filter(|v| !v.is_finite()) {

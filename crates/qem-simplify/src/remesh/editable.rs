@@ -412,3 +412,6 @@ fn third(face: [u32; 3], a: u32, b: u32) -> u32 {
 fn runs(face: [u32; 3], a: u32, b: u32) -> bool {
     (0..3).any(|i| face[i] == a && face[(i + 1) % 3] == b)
 }
+
+#[cfg(test)]
+mod tests;

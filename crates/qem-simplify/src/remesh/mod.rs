@@ -3,8 +3,6 @@
 
 mod cluster;
 mod editable;
-#[cfg(test)]
-mod editable_tests;
 mod passes;
 mod repair;
 mod surface;

@@ -4,13 +4,12 @@ use super::conv_weight::Adjoint;
 use super::{
     Acts, Bn, Conv, ConvWeight, DenseVars, LabelVars, Latent, Net, Node, Pool, PoolOp, internal,
 };
-use crate::candle::model::MeshVae;
+use crate::cpu::model::EngineModel;
 use crate::cpu::{Real, of};
 use crate::error::{Result, VaeError};
 use crate::net::config::FEATURE_CHANNELS;
 use crate::net::config::ModelConfig;
 use crate::net::plan::{ConvStep, ConvVars, NetPlan, PoolStep, Step};
-use candle_core::Var;
 use mesh_hierarchy::PoolMode;
 use spectral_conv::{ChebKernel, MaxKernel, MaxMode, SparseKernel, Workspace};
 use std::sync::Arc;
@@ -22,12 +21,11 @@ use std::sync::Arc;
 const FAR_SHARE: f64 = 0.1;
 const FAR_WINDOW: usize = if cfg!(test) { 16 } else { 1024 };
 
-/// What building the network needs at every layer: the plan's levels and operators, the state
-/// variables, the buffers allocated so far and the largest activation.
+/// What building the network needs at every layer: the plan's levels and operators, the
+/// buffers allocated so far and the largest activation.
 struct Builder<'a, T: Real> {
     plan: &'a NetPlan,
     config: &'a ModelConfig,
-    state: Vec<Var>,
     counts: Vec<usize>,
     max_batch: usize,
     acts: Acts<T>,
@@ -102,11 +100,12 @@ impl<T: Real> Builder<'_, T> {
         let bn = step.bn.map(|b| Bn {
             gamma: b.gamma.0,
             beta: b.beta.0,
-            running_mean: self.state[b.running_mean.0].clone(),
-            running_var: self.state[b.running_var.0].clone(),
+            running_mean: b.running_mean.0,
+            running_var: b.running_var.0,
             mean: Vec::new(),
             var: Vec::new(),
             inv_std: Vec::new(),
+            running: (Vec::new(), Vec::new()),
         });
         let out = if bn.is_some() {
             self.add(v, s.c_out)
@@ -209,17 +208,16 @@ fn level0_order(plan: &NetPlan) -> Result<Option<Vec<u32>>> {
 
 impl<T: Real> Net<T> {
     /// The network of `model` with buffers for batches of up to `max_batch`.
-    pub fn build(model: &MeshVae, max_batch: usize) -> Result<Self> {
+    pub fn build(model: &dyn EngineModel, max_batch: usize) -> Result<Self> {
         let plan = model.plan().ok_or_else(|| {
             VaeError::argument("model", "the CPU engine runs the paper's network only")
         })?;
-        let (names, vars): (Vec<String>, Vec<Var>) = model.trainable_vars().into_iter().unzip();
-        let mut grads: Vec<Vec<T>> = vars.iter().map(|v| vec![of(0.0); v.elem_count()]).collect();
+        let (names, lens): (Vec<String>, Vec<usize>) = model.trainable().into_iter().unzip();
+        let mut grads: Vec<Vec<T>> = lens.iter().map(|&n| vec![of(0.0); n]).collect();
         let config = model.config();
         let mut b = Builder {
             plan,
             config,
-            state: model.state_vars().into_iter().map(|(_, v)| v).collect(),
             counts: plan.vertex_counts(),
             max_batch,
             acts: Acts(Vec::new()),
@@ -269,7 +267,8 @@ impl<T: Real> Net<T> {
         let max_act = b.max_act;
         Ok(Self {
             names,
-            vars,
+            var_ids: model.var_ids(),
+            lens,
             grads,
             max_batch,
             v0: counts[0],

@@ -4,21 +4,21 @@
 //! step's gradients.
 
 use super::latent::Heads;
-use super::{BnStats, Inputs, Net, cpu_slice, forward_node, with_weights};
-use crate::candle::model::MeshVae;
+use super::{BnStats, Inputs, Net, forward_node, host, with_weights};
 use crate::cpu::kernels as k;
+use crate::cpu::model::EngineModel;
 use crate::cpu::{Real, f64_of};
 use crate::error::{Result, VaeError};
 use crate::net::config::FEATURE_CHANNELS;
 use crate::net::loss_weights::LossWeights;
-use candle_core::Tensor;
+use crate::numerics::host::{HostArray, HostTensor};
 
 impl<T: Real> Net<T> {
     /// w_rec · batch mean of Σ (x − x̂)² for features x `[B, V, 9]`, in inference mode. Leaves
     /// the last training step's gradients and batch statistics alone.
     pub fn rec_error(
         &mut self,
-        model: &MeshVae,
+        model: &dyn EngineModel,
         inputs: Inputs<'_>,
         w: &LossWeights,
     ) -> Result<f64> {
@@ -34,73 +34,79 @@ impl<T: Real> Net<T> {
 
     /// μ and σ `[B, latent]` of features x `[B, V, 9]` (labels c `[B, L]` for a conditional
     /// model), in the model's dtype.
-    pub fn encode(&mut self, model: &MeshVae, inputs: Inputs<'_>) -> Result<(Tensor, Tensor)> {
+    pub fn encode(
+        &mut self,
+        model: &dyn EngineModel,
+        inputs: Inputs<'_>,
+    ) -> Result<(HostTensor, HostTensor)> {
         let batch = self.infer(model, inputs, Pass::Encoder)?;
         let n = batch * self.latent;
-        let tensor = |v: &[T]| -> Result<Tensor> {
-            Ok(Tensor::from_slice(
-                v,
-                (batch, self.latent),
-                inputs.x.device(),
-            )?)
+        let tensor = |v: &[T]| HostTensor {
+            data: T::host_vec(v.to_vec()),
+            dims: vec![batch, self.latent],
         };
-        Ok((tensor(&self.lat.mu[..n])?, tensor(&self.lat.sigma[..n])?))
+        Ok((tensor(&self.lat.mu[..n]), tensor(&self.lat.sigma[..n])))
     }
 
     /// x̂ `[B, V, 9]` = decode(μ(x, c), c).
-    pub fn reconstruct(&mut self, model: &MeshVae, inputs: Inputs<'_>) -> Result<Tensor> {
+    pub fn reconstruct(
+        &mut self,
+        model: &dyn EngineModel,
+        inputs: Inputs<'_>,
+    ) -> Result<HostTensor> {
         let batch = self.infer(model, inputs, Pass::Whole)?;
-        self.output(batch, inputs.x.device())
+        Ok(self.output(batch))
     }
 
     /// x̂ `[B, V, 9]` from latent vectors z `[B, latent]` (labels c `[B, L]` for a conditional
     /// model).
-    pub fn decode(&mut self, model: &MeshVae, z: &Tensor, c: Option<&Tensor>) -> Result<Tensor> {
+    pub fn decode(
+        &mut self,
+        model: &dyn EngineModel,
+        z: HostArray<'_>,
+        c: Option<HostArray<'_>>,
+    ) -> Result<HostTensor> {
         self.check_model(model)?;
-        let batch = z.dim(0)?;
-        if z.dims() != [batch, self.latent] || batch == 0 || batch > self.max_batch {
+        let batch = z.dims.first().copied().unwrap_or(0);
+        let zd = host::<T>(z.data, "z")?;
+        if z.dims != [batch, self.latent]
+            || batch == 0
+            || batch > self.max_batch
+            || zd.len() != batch * self.latent
+        {
             return Err(VaeError::shape(
                 "Engine::decode",
                 format!(
                     "latent vectors of shape {:?}; expected [1 ..= {}, {}]",
-                    z.dims(),
-                    self.max_batch,
-                    self.latent
+                    z.dims, self.max_batch, self.latent
                 ),
             ));
         }
+        self.load_running_stats(model)?;
         let kept = self.keep();
         self.load_labels(c, batch)?;
-        let z = z.contiguous()?;
-        {
-            let (zs, zl) = z.storage_and_layout();
-            let zd = cpu_slice::<T>(&zs, zl, "z")?;
-            self.lat.z[..zd.len()].copy_from_slice(zd);
-        }
-        let (vars, names) = (self.vars.clone(), self.names.clone());
-        with_weights(&vars, &names, |w| {
+        self.lat.z[..zd.len()].copy_from_slice(zd);
+        with_weights(model, |w| {
             self.dense_decode(w, batch);
             for node in &mut self.dec {
                 forward_node(node, &mut self.acts, w, batch, BnStats::Running)?;
             }
             Ok(())
         })?;
-        let out = self.output(batch, z.device());
+        let out = self.output(batch);
         self.restore(kept);
-        out
+        Ok(out)
     }
 
     /// Runs the encoder (and with [`Pass::Whole`] the decoder, z = μ) on x in inference mode;
     /// returns B.
-    fn infer(&mut self, model: &MeshVae, inputs: Inputs<'_>, pass: Pass) -> Result<usize> {
+    fn infer(&mut self, model: &dyn EngineModel, inputs: Inputs<'_>, pass: Pass) -> Result<usize> {
         self.check_model(model)?;
-        // ε = 0 makes z = μ.
-        let x = inputs.x;
-        let eps = Tensor::zeros((x.dim(0)?, self.latent), x.dtype(), x.device())?;
+        self.load_running_stats(model)?;
         let kept = self.keep();
-        let batch = self.load_inputs(inputs, &eps)?;
-        let (vars, names) = (self.vars.clone(), self.names.clone());
-        let done = with_weights(&vars, &names, |w| {
+        // ε = 0 makes z = μ.
+        let batch = self.load_inputs(inputs, None)?;
+        let done = with_weights(model, |w| {
             for node in &mut self.enc {
                 forward_node(node, &mut self.acts, w, batch, BnStats::Running)?;
             }
@@ -136,7 +142,7 @@ impl<T: Real> Net<T> {
     }
 
     /// The decoder's output as `[B, V, 9]` in the template's vertex order.
-    fn output(&self, batch: usize, device: &candle_core::Device) -> Result<Tensor> {
+    fn output(&self, batch: usize) -> HostTensor {
         let n = self.v0 * FEATURE_CHANNELS * batch;
         let mut out = vec![crate::cpu::of::<T>(0.0); n];
         k::from_vcb(
@@ -145,11 +151,10 @@ impl<T: Real> Net<T> {
             (batch, self.v0, FEATURE_CHANNELS),
             self.order.as_deref(),
         );
-        Ok(Tensor::from_vec(
-            out,
-            (batch, self.v0, FEATURE_CHANNELS),
-            device,
-        )?)
+        HostTensor {
+            data: T::host_vec(out),
+            dims: vec![batch, self.v0, FEATURE_CHANNELS],
+        }
     }
 }
 

@@ -7,7 +7,7 @@ use super::Net;
 use crate::cpu::gemm::{Mat, matmul, matmul_serial};
 use crate::cpu::kernels as k;
 use crate::cpu::{Real, f64_of, of};
-use crate::net::latent::{kl_unit, kl_unit_dsigma};
+use crate::net::latent::{kl_unit, kl_unit_dsigma, sigma_of_sigmoid, sigmoid};
 use crate::net::loss_weights::LossWeights;
 
 /// Which dense heads [`Net::heads_forward`] evaluates.
@@ -68,7 +68,6 @@ impl<T: Real> Net<T> {
             }
         }
         let mut kl = 0.0;
-        let two: T = of(2.0);
         for i in 0..batch * l {
             let j = i % l;
             let mu = lat.mu[i] + w[d.b_mu][j];
@@ -77,15 +76,15 @@ impl<T: Real> Net<T> {
                 // sigmoid(s) = 1/2: σ = 1.
                 Heads::MeanOnly => 0.0,
             };
-            let sig: T = of(1.0 / (1.0 + (-s).exp()));
-            let sigma = crate::numerics::real::Real::sqrt(sig * two);
+            let sig: T = of(sigmoid(s));
+            let Ok(sigma) = sigma_of_sigmoid(&sig);
             lat.mu[i] = mu;
             lat.sig[i] = sig;
             lat.sigma[i] = sigma;
             lat.z[i] = mu + sigma * lat.eps[i];
             let (m, sg) = (f64_of(mu), f64_of(sigma));
-            let var = sg * sg;
-            kl += kl_unit(m, var);
+            let Ok(unit) = kl_unit(&m, &(sg * sg));
+            kl += unit;
         }
         0.5 * kl / batch as f64
     }
@@ -155,22 +154,10 @@ impl<T: Real> Net<T> {
             let ct = Mat::col_major(&self.cond[..batch * n], n);
             let dims = (n, l, batch);
             let grads = &mut self.grads;
-            matmul(
-                &mut grads[labels.mu],
-                (l, 1),
-                ct,
-                Mat::row_major(dmu, l),
-                dims,
-                false,
-            );
-            matmul(
-                &mut grads[labels.sigma],
-                (l, 1),
-                ct,
-                Mat::row_major(ds, l),
-                dims,
-                false,
-            );
+            for (var, grad) in [(labels.mu, dmu), (labels.sigma, ds)] {
+                let grad = Mat::row_major(grad, l);
+                matmul(&mut grads[var], (l, 1), ct, grad, dims, false);
+            }
             let gt = Mat::col_major(g, batch);
             matmul(
                 &mut grads[labels.dec],

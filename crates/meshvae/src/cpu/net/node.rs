@@ -8,6 +8,12 @@ use crate::error::Result;
 use crate::net::batch_norm as bn;
 use spectral_conv::ConvDims;
 
+/// 1 / √(v + ε), batch norm's factor (`net/batch_norm.rs`).
+fn inv_std(v: &f64) -> f64 {
+    let Ok(f) = bn::inv_std(v);
+    f
+}
+
 /// Which statistics a batch norm normalises with: the batch's own (training; they are kept for
 /// the backward pass and the running averages) or the running ones (inference, as `Mode::Eval`).
 #[derive(Clone, Copy, PartialEq)]
@@ -44,21 +50,21 @@ pub(super) fn forward_node<T: Real>(
             );
             acts.put(c.terms, terms);
             if let (Some(bn), BnStats::Running) = (&c.bn, stats) {
-                let (mean, var) = bn.running_stats()?;
-                let inv_std: Vec<f64> = var.iter().map(|v| 1.0 / (v + bn::EPS).sqrt()).collect();
+                let (mean, var) = &bn.running;
+                let inv_std: Vec<f64> = var.iter().map(inv_std).collect();
                 let out = &mut acts.0[c.out][..ny];
                 let params = (w[bn.gamma], w[bn.beta]);
                 k::bn_forward(
                     &pre[..ny],
                     out,
-                    (&mean, &inv_std),
+                    (mean, &inv_std),
                     params,
                     (c.co, batch),
                     c.tanh,
                 );
             } else if let Some(bn) = &mut c.bn {
                 let (mean, var) = k::moments(&pre[..ny], (c.co, batch));
-                bn.inv_std = var.iter().map(|v| 1.0 / (v + bn::EPS).sqrt()).collect();
+                bn.inv_std = var.iter().map(inv_std).collect();
                 bn.mean = mean;
                 bn.var = var;
                 let out = &mut acts.0[c.out][..ny];

@@ -3,8 +3,8 @@
 //! bar, the summary).
 
 use super::Trainer;
-use crate::cpu::Engine;
 use crate::error::Result;
+use crate::executor::Executor;
 use crate::train::best::{BestState, keep_weights, write_current};
 use crate::train::epoch_log::{EpochRecord, append_log};
 use crate::train::request::TrainSummary;
@@ -30,7 +30,7 @@ impl Trainer<'_> {
     pub(super) fn end_epoch(
         &mut self,
         steps: EpochSteps,
-        mut engine: Option<Engine>,
+        mut executor: Box<dyn Executor>,
     ) -> Result<(EpochRecord, bool)> {
         let n = self.data.split.train.len().max(1) as f64;
         // The schedule sees the loss that chooses the weights (validation, or training), and
@@ -54,16 +54,16 @@ impl Trainer<'_> {
         let test_due = finished || self.adam.step_count() / every > steps.steps_before / every;
         let test_loss = if test_due {
             let t = Instant::now();
-            let loss = self.loss_on(&self.data.split.test, engine.as_mut())?;
+            let loss = self.loss_on(&self.data.split.test, executor.as_mut())?;
             self.phases.test += t.elapsed().as_secs_f64();
             loss
         } else {
             None
         };
         if self.keep_in_memory {
-            self.kept_engine = engine;
+            self.kept = Some(executor);
         } else {
-            drop(engine);
+            drop(executor);
         }
         let record = self.record(&steps, n, test_loss);
         debug_assert!(!steps.looked_at || score == record.score(self.data.split.selection()));
@@ -97,8 +97,8 @@ impl Trainer<'_> {
             since_best: (self.schedule)
                 .stops_early()
                 .then_some(self.progress.schedule.since_best as u64),
-            executor: Some(self.executor.kind),
-            executor_reason: self.executor.reason.clone(),
+            executor: Some(self.choice.kind),
+            executor_reason: self.choice.reason.clone(),
         }
     }
 
@@ -190,8 +190,8 @@ impl Trainer<'_> {
             rollbacks: progress.schedule.rollbacks,
             clipped_steps: (self.adam.grad_clip().is_on()).then(|| self.adam.grad_clip().clipped()),
             seconds: progress.seconds,
-            path: self.executor.kind.to_string(),
-            executor_reason: self.executor.reason.clone(),
+            path: self.choice.kind.to_string(),
+            executor_reason: self.choice.reason.clone(),
             best_test_epoch: (progress.best_test_epoch > 0).then_some(progress.best_test_epoch),
             best_test_loss: (progress.best_test_loss.is_finite())
                 .then_some(progress.best_test_loss),
@@ -238,7 +238,7 @@ impl Trainer<'_> {
             best_loss: self.progress.best_loss,
             selected_on: self.data.split.selection(),
             seconds: self.start.elapsed().as_secs_f64(),
-            executor: Some(self.executor),
+            executor: Some(self.choice.clone()),
         }
     }
 }

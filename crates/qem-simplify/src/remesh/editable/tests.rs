@@ -1,10 +1,10 @@
 //! The editable mesh's operations: each keeps a consistently oriented 2-manifold of the same
 //! Euler characteristic, and the link condition refuses what would pinch or fold.
 
-use super::editable::*;
-use super::surface::NONE;
+use super::*;
 use crate::geometry::to_f64;
 use crate::manifold::manifold_defect;
+use crate::remesh::surface::NONE;
 use mesh_io::{QualityReport, TriMesh};
 
 fn editable(mesh: &TriMesh) -> Editable {

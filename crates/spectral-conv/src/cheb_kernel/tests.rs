@@ -1,6 +1,6 @@
 //! The fused kernels against dense references, in every array layout they take.
 
-use crate::cheb_kernel::{ChebShape, Inputs, Need, backward, forward};
+use super::{ChebShape, Inputs, Need, backward, forward};
 use crate::kernel::Csr;
 use crate::layout::{Blocks, Io, to_channel_major};
 use crate::test_util::{dense_apply, random_matrix, random_vec};

@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::candle::batch_norm::Mode;
+use crate::executor::{Batch, Executor};
 use crate::net::config::{ConvKind, ModelConfig};
 use crate::numerics::rng::Rng;
 use candle_core::Device;
@@ -39,12 +40,8 @@ fn inputs(model: &MeshVae, batch: usize, seed: u64) -> (Tensor, Tensor) {
 }
 
 fn values(t: &Tensor) -> Vec<f64> {
-    t.flatten_all()
-        .unwrap()
-        .to_dtype(DType::F64)
-        .unwrap()
-        .to_vec1()
-        .unwrap()
+    let flat = t.flatten_all().and_then(|t| t.to_dtype(DType::F64));
+    flat.and_then(|t| t.to_vec1()).unwrap()
 }
 
 /// max |a − b| / max(max |b|, floor).
@@ -95,7 +92,7 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
         .training_loss(&x, c.as_ref(), &eps, &weights)
         .unwrap();
     let grads = reference.backward(&loss.total).unwrap();
-    let mut engine = Engine::new(&ours, batch + 2).unwrap();
+    let mut engine = EngineExecutor::new(&ours, batch + 2).unwrap();
     let got = engine
         .forward_backward(&ours, &x, c.as_ref(), &eps, &weights)
         .unwrap();
@@ -110,10 +107,7 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
     );
     // Mean-type poolings and sampling leave level 0 through a sparse operator: the engine then
     // runs it renumbered, so these comparisons check the renumbering too.
-    let renumbered = match &engine.net {
-        Typed::F32(n) => n.renumbered(),
-        Typed::F64(n) => n.renumbered(),
-    };
+    let renumbered = engine.engine.renumbered();
     let sparse_pool = matches!(
         config.pool,
         Pooler::Mean | Pooler::Qem | Pooler::Remesh | Pooler::Sampling
@@ -131,7 +125,7 @@ fn compare_step(config: &ModelConfig, dtype: DType, batch: usize, tol: f64) {
         got.kl,
         loss.kl
     );
-    let ours_grads = engine.gradients().unwrap();
+    let ours_grads = engine.gradients(&ours).unwrap();
     assert_eq!(ours_grads.len(), reference.trainable_vars().len());
     // The norm clipping reads (dense weights through Gram matrices) against the sum over
     // candle's gradients.
@@ -265,7 +259,7 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
             ..Default::default()
         };
         let (model, _) = models(&config, dtype);
-        let mut engine = Engine::new(&model, 5).unwrap();
+        let mut engine = EngineExecutor::new(&model, 5).unwrap();
         let mut adam = Adam::new(model.trainable_vars(), 1e-2).unwrap();
         // A few steps, so that the running statistics are neither 0/1 nor a batch's own.
         for seed in 0..3 {
@@ -279,12 +273,14 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
         engine
             .forward_backward(&model, &x, None, &eps, &weights)
             .unwrap();
-        let before = engine.gradients().unwrap();
+        let before = engine.gradients(&model).unwrap();
         // Another batch size than the step's, and one mesh alone (batch statistics would be 0).
         for batch in [3, 1] {
             let (x, _) = inputs(&model, batch, 11);
             let want = model.rec_error(&x, None, &weights).unwrap();
-            let got = engine.rec_error(&model, &x, None, &weights).unwrap();
+            let got = engine
+                .rec_error(&model, Batch { x: &x, c: None }, &weights)
+                .unwrap();
             assert!(
                 (got - want).abs() <= tol * want.abs(),
                 "{pool:?} {dtype:?} B={batch}: {got} vs {want}"
@@ -297,20 +293,22 @@ fn inference_error_equals_candle_and_leaves_the_step_alone() {
                 assert!(d <= tol, "{case}: {what} differs by {d:e}");
             };
             let want = model.encode(&x, None, Mode::Eval).unwrap();
-            let (mu, sigma) = engine.encode(&model, &x, None).unwrap();
+            let (mu, sigma) = engine.encode(&model, Batch { x: &x, c: None }).unwrap();
             close(&mu, &want.mu, "μ");
             close(&sigma, &want.sigma, "σ");
             let z = (&want.mu + 0.5).unwrap();
-            let decoded = engine.decode(&model, &z, None).unwrap();
+            let decoded = engine.decode(&model, Batch { x: &z, c: None }).unwrap();
             close(
                 &decoded,
                 &model.decode(&z, None, Mode::Eval).unwrap(),
                 "decode",
             );
-            let rec = engine.reconstruct(&model, &x, None).unwrap();
+            let rec = engine
+                .reconstruct(&model, Batch { x: &x, c: None })
+                .unwrap();
             close(&rec, &model.reconstruct(&x, None).unwrap(), "reconstruct");
         }
-        for ((name, a), (_, b)) in before.iter().zip(&engine.gradients().unwrap()) {
+        for ((name, a), (_, b)) in before.iter().zip(&engine.gradients(&model).unwrap()) {
             assert_eq!(values(a), values(b), "{pool:?}: gradient of {name} changed");
         }
     }
@@ -326,7 +324,7 @@ fn train_clipped(config: &ModelConfig, engine: bool, steps: usize, clip: f64) ->
     let weights = LossWeights::default();
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
     adam.set_grad_clip(clip).unwrap();
-    let mut e = engine.then(|| Engine::new(&model, 4).unwrap());
+    let mut e = engine.then(|| EngineExecutor::new(&model, 4).unwrap());
     for step in 0..steps {
         // The last batch is smaller, as at the end of an epoch.
         let batch = if step + 1 == steps { 3 } else { 4 };
@@ -423,8 +421,12 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
         ..Default::default()
     };
     let (model, _) = models(&wide, DType::F32);
-    assert!(Engine::unsupported(&model).unwrap().contains("K = 9"));
-    let err = Engine::new(&model, 2).unwrap_err().to_string();
+    assert!(
+        EngineExecutor::unsupported(&model)
+            .unwrap()
+            .contains("K = 9")
+    );
+    let err = EngineExecutor::new(&model, 2).unwrap_err().to_string();
     assert!(
         err.contains("does not cover") && err.contains("K = 9"),
         "{err}"
@@ -438,53 +440,44 @@ fn unsupported_models_are_declined_and_bad_inputs_are_errors() {
     }
     .conditional_on(&names);
     let (model, _) = models(&conditional, DType::F64);
-    let mut engine = Engine::new(&model, 2).unwrap();
+    let mut engine = EngineExecutor::new(&model, 2).unwrap();
     let (x, eps) = inputs(&model, 2, 1);
     let w = LossWeights::default();
-    let err = engine
-        .forward_backward(&model, &x, None, &eps, &w)
-        .unwrap_err();
-    assert!(err.to_string().contains("give each mesh's label"), "{err}");
-    let c = model.one_hot(&["a"]).unwrap();
-    let err = engine
-        .forward_backward(&model, &x, Some(&c), &eps, &w)
-        .unwrap_err();
-    assert!(err.to_string().contains("[2, 2]"), "{err}");
-    let c = model.one_hot(&["a", "b"]).unwrap();
-    assert!(
+    let step = |engine: &mut EngineExecutor, x: &Tensor, c: Option<&Tensor>, eps: &Tensor| {
         engine
-            .forward_backward(&model, &x, Some(&c), &eps, &w)
-            .is_ok()
-    );
+            .forward_backward(&model, x, c, eps, &w)
+            .map_err(|e| e.to_string())
+    };
+    let err = step(&mut engine, &x, None, &eps).unwrap_err();
+    assert!(err.contains("give each mesh's label"), "{err}");
+    let c = model.one_hot(&["a"]).unwrap();
+    let err = step(&mut engine, &x, Some(&c), &eps).unwrap_err();
+    assert!(err.contains("[2, 2]"), "{err}");
+    let c = model.one_hot(&["a", "b"]).unwrap();
+    assert!(step(&mut engine, &x, Some(&c), &eps).is_ok());
 
     let config = ModelConfig {
         latent: 4,
         ..Default::default()
     };
     let (model, _) = models(&config, DType::F64);
-    assert!(Engine::new(&model, 0).is_err());
-    let mut engine = Engine::new(&model, 2).unwrap();
+    assert!(EngineExecutor::new(&model, 0).is_err());
+    let mut engine = EngineExecutor::new(&model, 2).unwrap();
     let mut adam = Adam::new(model.trainable_vars(), 1e-3).unwrap();
     assert!(engine.apply_adam(&mut adam, 1.0).is_err(), "no step yet");
+    let step = |engine: &mut EngineExecutor, x: &Tensor, eps: &Tensor| {
+        engine
+            .forward_backward(&model, x, None, eps, &w)
+            .map_err(|e| e.to_string())
+    };
     let (x, eps) = inputs(&model, 3, 1);
-    let w = LossWeights::default();
-    let err = engine
-        .forward_backward(&model, &x, None, &eps, &w)
-        .unwrap_err();
-    assert!(err.to_string().contains("at most 2"), "{err}");
+    let err = step(&mut engine, &x, &eps).unwrap_err();
+    assert!(err.contains("at most 2"), "{err}");
     let (x, eps) = inputs(&model, 2, 1);
     let short = x.narrow(1, 0, 10).unwrap();
-    assert!(
-        engine
-            .forward_backward(&model, &short, None, &eps, &w)
-            .is_err()
-    );
+    assert!(step(&mut engine, &short, &eps).is_err());
     let wrong = x.to_dtype(DType::F32).unwrap();
-    assert!(
-        engine
-            .forward_backward(&model, &wrong, None, &eps, &w)
-            .is_err()
-    );
+    assert!(step(&mut engine, &wrong, &eps).is_err());
     // The model still decodes (the engine left its weights usable).
     engine.forward_backward(&model, &x, None, &eps, &w).unwrap();
     assert!(model.decode(&eps, None, Mode::Eval).is_ok());
@@ -502,25 +495,38 @@ fn conditional_inference_equals_candle_and_bad_latents_are_errors() {
     let (model, twin) = models(&config, DType::F64);
     // Non-zero label weights (they start at zero) in the model the two paths share.
     let _ = labels(&model, &twin, 1);
-    let mut engine = Engine::new(&model, 4).unwrap();
+    let mut engine = EngineExecutor::new(&model, 4).unwrap();
     let (x, _) = inputs(&model, 3, 5);
     let c = model.one_hot(&["trot", "gallop", "trot"]).unwrap();
     let want = model.encode(&x, Some(&c), Mode::Eval).unwrap();
-    let (mu, _) = engine.encode(&model, &x, Some(&c)).unwrap();
+    let (mu, _) = engine.encode(&model, Batch { x: &x, c: Some(&c) }).unwrap();
     assert!(rel_diff(&values(&mu), &values(&want.mu), 1e-3) < 1e-10);
-    let rec = engine.reconstruct(&model, &x, Some(&c)).unwrap();
+    let rec = engine
+        .reconstruct(&model, Batch { x: &x, c: Some(&c) })
+        .unwrap();
     let want = model.reconstruct(&x, Some(&c)).unwrap();
     assert!(rel_diff(&values(&rec), &values(&want), 1e-3) < 1e-10);
     // A blend of labels decodes as candle does too.
     let blend = Tensor::from_vec(vec![4.0, 4.0, 8.0, 0.0, 0.0, 8.0], (3, 2), &Device::Cpu).unwrap();
     let z = (&mu * 0.5).unwrap();
-    let got = engine.decode(&model, &z, Some(&blend)).unwrap();
+    let blended = Batch {
+        x: &z,
+        c: Some(&blend),
+    };
+    let got = engine.decode(&model, blended).unwrap();
     let want = model.decode(&z, Some(&blend), Mode::Eval).unwrap();
     assert!(rel_diff(&values(&got), &values(&want), 1e-3) < 1e-10);
 
-    let err = engine.decode(&model, &z, None).unwrap_err().to_string();
+    let err = engine
+        .decode(&model, Batch { x: &z, c: None })
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("label"), "{err}");
     let wide = Tensor::zeros((5, 6), DType::F64, &Device::Cpu).unwrap();
-    let err = engine.decode(&model, &wide, Some(&blend)).unwrap_err();
+    let too_wide = Batch {
+        x: &wide,
+        c: Some(&blend),
+    };
+    let err = engine.decode(&model, too_wide).unwrap_err();
     assert!(err.to_string().contains("[1 ..= 4, 6]"), "{err}");
 }
