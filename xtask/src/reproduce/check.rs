@@ -6,6 +6,7 @@
 
 use super::commit::Commit;
 use super::plan::{self, Run};
+use super::platform::Platform;
 use super::run::{self, Place, RunResult, RunSettings};
 use super::{LoadedSet, ReproError};
 use std::fmt::Write;
@@ -138,6 +139,19 @@ pub fn check(
                 ));
             }
         }
+    }
+    let here = Platform::this();
+    match &stored.platform {
+        None => reasons.push(format!(
+            "The record does not name its machine (it was written before records kept it): \
+             the numbers depend on the CPU's SIMD features and data caches (`gemm` blocks its \
+             products by them), and this check ran on {here}."
+        )),
+        Some(then) if !then.same_numerics(&here) => reasons.push(format!(
+            "The record was trained on {then}; this check ran on {here}: other SIMD features \
+             or caches order the sums differently, and the difference grows over the steps."
+        )),
+        Some(_) => {}
     }
     if stored.settings.is_none() {
         reasons.push(

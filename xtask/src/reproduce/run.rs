@@ -5,6 +5,7 @@
 use super::ReproError;
 use super::commit::Commit;
 use super::plan::{Budget, Run};
+use super::platform::Platform;
 pub use super::settings::{RunSettings, setting_differences};
 use candle_core::Device;
 use mesh_io::MeshSet;
@@ -101,6 +102,10 @@ pub struct RunResult {
     /// whether the numbers still agree). Absent from records written before they kept it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub commit: Option<Commit>,
+    /// The machine that trained it, as far as the numbers depend on it (`--check` can match
+    /// them digit for digit only on the same). Absent from records written before they kept it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub platform: Option<Platform>,
 }
 
 /// [`meshvae::CopySplit`] as a run records it.
@@ -377,6 +382,7 @@ pub fn execute(
             hierarchy: trained.spec.hierarchy,
         }),
         commit: place.commit.cloned(),
+        platform: Some(Platform::this()),
     };
     let path = run.result_path(place.records);
     if let Some(parent) = path.parent() {
