@@ -8,6 +8,8 @@ their exact inverse (:func:`acap_features`, :class:`Normalization`, :func:`recon
 and models trained by ``meshvae train`` (:class:`Model`: ``encode``, ``decode``).
 :mod:`meshvae.sampling` is a psbody-free drop-in for CoMA's, SpiralNet++'s and Neural3DMM's
 ``mesh_sampling.generate_transform_matrices``, with SpiralNet++'s ``transform.pkl``.
+:mod:`meshvae.torch` (imported on its own, needs torch) is the network as PyTorch modules:
+``ChebConv``, ``Pool``, ``DePool``, ``MeshVAE`` (``from_folder``, ``save``, ``loss``).
 
 Arrays are numpy: positions float32 [V, 3] or [N, V, 3], faces int32 [F, 3], features float32
 [N, V, 9]. Errors are :class:`MeshvaeError`: :class:`InputError` (also a ``ValueError``) or

@@ -227,3 +227,32 @@ class Model:
         """A conditional model's class labels; empty for an unconditional one."""
     @property
     def path(self) -> Path: ...
+
+# Private: what meshvae.torch reads from and writes to model folders (python/src/torch_support.rs).
+
+def _torch_model_state(
+    model: Model,
+) -> tuple[dict[str, _F32], Hierarchy, Normalization | None]:
+    """The model's variables by name (float32), its hierarchy, its normalisation (None for a
+    position network)."""
+
+def _torch_model_inputs(model: Model, positions: _Floats) -> _F32:
+    """The network's input [N, V, 9] of positions [N, V, 3]: normalised ACAP features."""
+
+def _torch_write_weights(
+    model: Model, path: _Path, tensors: dict[str, _F32], epoch: int | None = None
+) -> None:
+    """Writes every variable of the model as a weights file meshvae reads."""
+
+def _torch_engine_step(
+    model: Model,
+    tensors: dict[str, _F32],
+    x: _Floats,
+    eps: _Floats,
+    labels: _Floats | None,
+    lr: float,
+    betas: tuple[float, float],
+    adam_eps: float,
+    loss_weights: tuple[float, float, float],
+) -> tuple[tuple[float, float, float, float], dict[str, _F32], dict[str, _F32]]:
+    """One CPU-engine step: (total, rec, kl, l2), variables after, gradients of rec + kl."""

@@ -152,6 +152,13 @@ pub struct Normalization {
     inner: deform_features::Normalization,
 }
 
+impl Normalization {
+    /// A normalisation the crates fitted or loaded (for `torch_support.rs`).
+    pub(crate) fn from_inner(inner: deform_features::Normalization) -> Self {
+        Self { inner }
+    }
+}
+
 #[pymethods]
 impl Normalization {
     #[new]

@@ -21,6 +21,11 @@ pub struct Hierarchy {
 }
 
 impl Hierarchy {
+    /// A hierarchy the crates built or loaded (for `torch_support.rs`).
+    pub(crate) fn from_inner(inner: mesh_hierarchy::Hierarchy) -> Self {
+        Self { inner }
+    }
+
     fn step(&self, step: usize) -> PyResult<&PoolingOp> {
         self.inner.pooling.get(step).ok_or_else(|| {
             input(format!(

@@ -5,7 +5,8 @@
 //! positions and features, int32 faces, int64 vertex maps), `scipy.sparse.csr_matrix` float32
 //! operators, and the classes `MeshSet`, `Simplified`, `Hierarchy`, `Normalization`,
 //! `FeatureFile`, `Model`,
-//! and the levels behind `meshvae.sampling` (CoMA / SpiralNet++ transform matrices).
+//! and the levels behind `meshvae.sampling` (CoMA / SpiralNet++ transform matrices), and what
+//! `meshvae.torch` reads from and writes to model folders (`torch_support`).
 //!
 //! A thin layer: every computation is a call into mesh-io, qem-simplify, mesh-hierarchy,
 //! deform-features or meshvae (trained models), the same calls the `meshvae` command makes, so
@@ -25,6 +26,7 @@ mod mesh;
 mod model;
 mod sampling;
 mod simplify;
+mod torch_support;
 
 use pyo3::prelude::*;
 
@@ -46,5 +48,9 @@ fn _meshvae(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(features::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(features::load_features, m)?)?;
     m.add_class::<model::Model>()?;
+    m.add_function(wrap_pyfunction!(torch_support::_torch_model_state, m)?)?;
+    m.add_function(wrap_pyfunction!(torch_support::_torch_model_inputs, m)?)?;
+    m.add_function(wrap_pyfunction!(torch_support::_torch_write_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(torch_support::_torch_engine_step, m)?)?;
     Ok(())
 }

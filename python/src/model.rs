@@ -30,6 +30,11 @@ pub struct Model {
 }
 
 impl Model {
+    /// The loaded model folder (for `torch_support.rs`).
+    pub(crate) fn trained(&self) -> &TrainedModel {
+        &self.inner
+    }
+
     /// The one-hot label rows `[B, L]` for a conditional model (`None` for an unconditional
     /// one), checking that labels are given exactly when the model needs them, one per row.
     fn conditions(&self, labels: Option<&[String]>, rows: usize) -> PyResult<Option<Tensor>> {

@@ -57,6 +57,15 @@ def cli() -> Path:
     return Path(path)
 
 
+@pytest.fixture(scope="session")
+def horse_model(cli, horse_path, tmp_path_factory) -> Path:
+    """A horse-gallop model folder trained briefly by the command line (20 steps, far from
+    trained: the tests compare code paths, not models). Read it; never write into it."""
+    out = tmp_path_factory.mktemp("horse-model") / "model"
+    run_cli(cli, "train", horse_path, "--out", out, "--steps", 20, "--quiet")
+    return out
+
+
 def run_cli(cli: Path, *args) -> str:
     done = subprocess.run(
         [str(cli), *map(str, args)], capture_output=True, text=True, check=False

@@ -83,3 +83,23 @@ def test_a_non_manifold_mesh(sphere):
     doubled = np.concatenate([faces, faces[:1]])  # one triangle twice
     with pytest.raises(meshvae.InputError, match="not a 2-manifold"):
         meshvae.simplify(vertices, doubled)
+
+
+def test_meshvae_imports_without_torch_and_meshvae_torch_says_how_to_get_it():
+    """`import meshvae` never needs torch; `import meshvae.torch` without it is an ImportError
+    saying `pip install torch` (torch is hidden from a fresh interpreter, installed or not)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; sys.modules['torch'] = None\n"
+        "import meshvae\n"
+        "try:\n"
+        "    import meshvae.torch\n"
+        "except ImportError as e:\n"
+        "    print('ImportError:', e)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert "ImportError: meshvae.torch needs PyTorch" in done.stdout
+    assert "pip install torch" in done.stdout
