@@ -33,8 +33,16 @@ impl Commit {
                 .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
         };
         let describe = git(&["describe", "--always", "--abbrev=12"])?;
-        // Untracked files (run folders, notes) do not change what the code computes.
-        let status = git(&["status", "--porcelain", "--untracked-files=no"])?;
+        // Untracked files (run folders, notes) and the documentation (the records and pages a
+        // reproduction writes) do not change what the code computes.
+        let status = git(&[
+            "status",
+            "--porcelain",
+            "--untracked-files=no",
+            "--",
+            ".",
+            ":(exclude)docs",
+        ])?;
         Some(Self {
             describe,
             dirty: !status.is_empty(),
@@ -95,5 +103,36 @@ mod tests {
             assert!(Commit::of(&nowhere).is_none());
         }
         let _ = std::fs::remove_dir_all(&nowhere);
+    }
+
+    #[test]
+    fn only_code_changes_make_a_tree_dirty() {
+        let dir = std::env::temp_dir().join(format!("meshvae-commit-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("docs")).unwrap();
+        let git = |args: &[&str]| {
+            let ok = Command::new("git")
+                .arg("-C")
+                .arg(&dir)
+                .args(["-c", "user.name=t", "-c", "user.email=t@t"])
+                .args(args)
+                .status()
+                .is_ok_and(|s| s.success());
+            assert!(ok, "git {args:?}");
+        };
+        std::fs::write(dir.join("code.rs"), "1").unwrap();
+        std::fs::write(dir.join("docs/record.json"), "1").unwrap();
+        git(&["init", "-q"]);
+        git(&["add", "."]);
+        git(&["commit", "-q", "-m", "c"]);
+        assert!(!Commit::of(&dir).unwrap().dirty);
+        std::fs::write(dir.join("docs/record.json"), "2").unwrap();
+        assert!(
+            !Commit::of(&dir).unwrap().dirty,
+            "a changed record is not code"
+        );
+        std::fs::write(dir.join("code.rs"), "2").unwrap();
+        assert!(Commit::of(&dir).unwrap().dirty, "changed code is");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
