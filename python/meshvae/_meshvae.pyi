@@ -107,12 +107,18 @@ class Hierarchy:
     def pool_kind(self) -> str: ...
     @property
     def vertex_counts(self) -> list[int]: ...
-    def laplacian(self, level: int) -> scipy.sparse.csr_matrix:
-        """Rescaled Laplacian of `level`, V x V float32."""
-    def pooling(self, step: int) -> scipy.sparse.csr_matrix:
-        """Pooling matrix P of `step`, m x n float32: coarse = P @ fine."""
-    def depooling(self, step: int) -> scipy.sparse.csr_matrix:
-        """De-pooling matrix D of `step`, n x m float32: fine = D @ coarse."""
+    def laplacian(
+        self, level: int, dtype: Literal["float32", "float64"] | None = None
+    ) -> scipy.sparse.csr_matrix:
+        """Rescaled Laplacian of `level`, V x V, float32 (default) or float64 (as computed)."""
+    def pooling(
+        self, step: int, dtype: Literal["float32", "float64"] | None = None
+    ) -> scipy.sparse.csr_matrix:
+        """Pooling matrix P of `step`, m x n (dtype as laplacian): coarse = P @ fine."""
+    def depooling(
+        self, step: int, dtype: Literal["float32", "float64"] | None = None
+    ) -> scipy.sparse.csr_matrix:
+        """De-pooling matrix D of `step`, n x m (dtype as laplacian): fine = D @ coarse."""
     def cluster(self, step: int) -> _I64 | None: ...
     def positions(self, level: int) -> _F32: ...
     def faces(self, level: int) -> _I32: ...

@@ -53,6 +53,23 @@ pub fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<f32>, Vec<usi
     )))
 }
 
+/// A float32 or float64 array as f64 values in C order (float32 widened exactly), with its
+/// shape.
+pub fn floats64(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<f64>, Vec<usize>)> {
+    let a = ndarray(obj, name)?;
+    let shape = a.shape().to_vec();
+    if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f64>>() {
+        return Ok((values(&x), shape));
+    }
+    if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f32>>() {
+        return Ok((values(&x).into_iter().map(f64::from).collect(), shape));
+    }
+    Err(input(format!(
+        "{name}: expected a float32 or float64 array, got dtype {}",
+        dtype_name(&a)
+    )))
+}
+
 /// An integer array as u32 values in C order, with its shape; negative or too large values are
 /// errors naming the argument.
 pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<u32>, Vec<usize>)> {

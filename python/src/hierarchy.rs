@@ -77,18 +77,28 @@ impl Hierarchy {
     }
 }
 
-/// A `CsrMatrix` as `scipy.sparse.csr_matrix` float32.
-fn csr<'py>(py: Python<'py>, m: &CsrMatrix) -> PyResult<Bound<'py, PyAny>> {
+/// A `CsrMatrix` as `scipy.sparse.csr_matrix` of `dtype` ("float32", the default, or
+/// "float64", the values as computed).
+fn csr<'py>(py: Python<'py>, m: &CsrMatrix, dtype: Option<&str>) -> PyResult<Bound<'py, PyAny>> {
     let sparse = py.import("scipy.sparse").map_err(|e| {
         pyo3::exceptions::PyImportError::new_err(format!(
             "meshvae needs scipy for sparse matrices (pip install scipy): {e}"
         ))
     })?;
-    let data = array(
-        py,
-        m.values().iter().map(|&v| v as f32).collect(),
-        &[m.nnz()],
-    )?;
+    let data = match dtype.unwrap_or("float32") {
+        "float32" => array(
+            py,
+            m.values().iter().map(|&v| v as f32).collect(),
+            &[m.nnz()],
+        )?
+        .into_any(),
+        "float64" => array(py, m.values().to_vec(), &[m.nnz()])?.into_any(),
+        other => {
+            return Err(input(format!(
+                "dtype: {other:?} is not \"float32\" or \"float64\""
+            )));
+        }
+    };
     let indices = array(
         py,
         m.indices().iter().map(|&i| i64::from(i)).collect(),
@@ -184,22 +194,42 @@ impl Hierarchy {
         self.inner.vertex_counts()
     }
 
-    /// The rescaled Laplacian L̃ of ``level`` (0 = the template), V×V float32 CSR.
-    fn laplacian<'py>(&self, py: Python<'py>, level: usize) -> PyResult<Bound<'py, PyAny>> {
-        csr(py, &self.level(level)?.laplacian)
+    /// The rescaled Laplacian L̃ of ``level`` (0 = the template), V×V CSR of ``dtype``
+    /// (``"float32"``, or ``"float64"``: the values as computed).
+    #[pyo3(signature = (level, dtype=None))]
+    fn laplacian<'py>(
+        &self,
+        py: Python<'py>,
+        level: usize,
+        dtype: Option<&str>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        csr(py, &self.level(level)?.laplacian, dtype)
     }
 
-    /// The pooling matrix P of ``step`` (level ``step`` → ``step + 1``), m×n float32 CSR:
-    /// coarse = P @ fine. For the mean poolers row c is 1/|cluster c| on the cluster's fine
-    /// vertices; for ``max`` and ``graph`` it is the mean over the set the max is taken on
-    /// (use :meth:`pool` for the max itself).
-    fn pooling<'py>(&self, py: Python<'py>, step: usize) -> PyResult<Bound<'py, PyAny>> {
-        csr(py, &self.step(step)?.pool)
+    /// The pooling matrix P of ``step`` (level ``step`` → ``step + 1``), m×n CSR of ``dtype``
+    /// (as :meth:`laplacian`): coarse = P @ fine. For the mean poolers row c is 1/|cluster c|
+    /// on the cluster's fine vertices; for ``max`` and ``graph`` it is the mean over the set
+    /// the max is taken on (use :meth:`pool` for the max itself).
+    #[pyo3(signature = (step, dtype=None))]
+    fn pooling<'py>(
+        &self,
+        py: Python<'py>,
+        step: usize,
+        dtype: Option<&str>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        csr(py, &self.step(step)?.pool, dtype)
     }
 
-    /// The de-pooling matrix D of ``step``, n×m float32 CSR: fine = D @ coarse.
-    fn depooling<'py>(&self, py: Python<'py>, step: usize) -> PyResult<Bound<'py, PyAny>> {
-        csr(py, &self.step(step)?.depool)
+    /// The de-pooling matrix D of ``step``, n×m CSR of ``dtype`` (as :meth:`laplacian`):
+    /// fine = D @ coarse.
+    #[pyo3(signature = (step, dtype=None))]
+    fn depooling<'py>(
+        &self,
+        py: Python<'py>,
+        step: usize,
+        dtype: Option<&str>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        csr(py, &self.step(step)?.depool, dtype)
     }
 
     /// int64 [n]: the coarse vertex of each fine vertex at ``step`` (the simplifier's clusters);

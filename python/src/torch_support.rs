@@ -2,7 +2,7 @@
 //! weights by name, the hierarchy and normalisation the folder holds, the network's scaled
 //! inputs of meshes, writing a weights file that `meshvae` reads, and one training step of the
 //! CPU engine (to check torch's step against). Private functions (`_torch_*`), called by
-//! `meshvae/torch.py` only; every computation is the crate's.
+//! `meshvae/torch/` only; every computation is the crate's.
 
 use crate::arrays::{self, array};
 use crate::errors::{input, to_py};
@@ -11,7 +11,6 @@ use crate::hierarchy::Hierarchy;
 use crate::model::Model;
 use candle_core::{DType, Device, Tensor};
 use meshvae::{Adam, AdamConfig, EngineExecutor, InputScaling, LossWeights, VaeError};
-use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::collections::{BTreeMap, HashMap};
@@ -21,23 +20,30 @@ fn candle_err(e: candle_core::Error) -> PyErr {
     to_py(VaeError::from(e))
 }
 
-/// A tensor as a float32 numpy array of its shape.
-fn to_numpy<'py>(py: Python<'py>, t: &Tensor) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let values = t
-        .to_dtype(DType::F32)
-        .and_then(|t| t.flatten_all())
+/// A tensor as a numpy array of its shape: float64 for an f64 tensor, float32 otherwise.
+fn to_numpy<'py>(py: Python<'py>, t: &Tensor) -> PyResult<Bound<'py, PyAny>> {
+    let flat = t.flatten_all().map_err(candle_err)?;
+    if t.dtype() == DType::F64 {
+        let values = flat.to_vec1::<f64>().map_err(candle_err)?;
+        return Ok(array(py, values, t.dims())?.into_any());
+    }
+    let values = (flat.to_dtype(DType::F32))
         .and_then(|t| t.to_vec1::<f32>())
         .map_err(candle_err)?;
-    array(py, values, t.dims())
+    Ok(array(py, values, t.dims())?.into_any())
 }
 
-/// A float array as an f32 CPU tensor of its shape.
-fn to_tensor(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Tensor> {
+/// A float array as a CPU tensor of its shape and `dtype` (F32 or F64).
+fn to_tensor(obj: &Bound<'_, PyAny>, name: &str, dtype: DType) -> PyResult<Tensor> {
+    if dtype == DType::F64 {
+        let (values, shape) = arrays::floats64(obj, name)?;
+        return Tensor::from_vec(values, shape.as_slice(), &Device::Cpu).map_err(candle_err);
+    }
     let (values, shape) = arrays::floats(obj, name)?;
     Tensor::from_vec(values, shape.as_slice(), &Device::Cpu).map_err(candle_err)
 }
 
-/// Tensors by name as a dict of float32 arrays.
+/// Tensors by name as a dict of numpy arrays (see [`to_numpy`]).
 fn tensors_dict<'py>(
     py: Python<'py>,
     tensors: &BTreeMap<String, Tensor>,
@@ -51,13 +57,17 @@ fn tensors_dict<'py>(
 
 /// A dict of float arrays as tensors by name, checked against the model's variables: the same
 /// names, every one present, the same shapes.
-fn model_tensors(model: &Model, tensors: &Bound<'_, PyDict>) -> PyResult<HashMap<String, Tensor>> {
+fn model_tensors(
+    model: &Model,
+    tensors: &Bound<'_, PyDict>,
+    dtype: DType,
+) -> PyResult<HashMap<String, Tensor>> {
     let reference = model.trained().model.tensors().map_err(to_py)?;
     let mut out = HashMap::new();
     let mut problems = Vec::new();
     for (key, value) in tensors.iter() {
         let name: String = key.extract()?;
-        let t = to_tensor(&value, &name)?;
+        let t = to_tensor(&value, &name, dtype)?;
         match reference.get(&name) {
             None => problems.push(format!("unexpected tensor {name}")),
             Some(r) if r.dims() != t.dims() => problems.push(format!(
@@ -112,7 +122,7 @@ pub fn _torch_model_inputs<'py>(
     py: Python<'py>,
     model: &Model,
     positions: &Bound<'py, PyAny>,
-) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+) -> PyResult<Bound<'py, PyAny>> {
     let trained = model.trained();
     let v = trained.spec.vertices;
     let (values, shape) = arrays::floats(positions, "positions")?;
@@ -156,7 +166,9 @@ pub fn _torch_write_weights(
     epoch: Option<usize>,
 ) -> PyResult<()> {
     let trained = model.trained();
-    let tensors: BTreeMap<String, Tensor> = model_tensors(model, tensors)?.into_iter().collect();
+    let tensors: BTreeMap<String, Tensor> = model_tensors(model, tensors, DType::F32)?
+        .into_iter()
+        .collect();
     py.detach(|| trained.model.save_snapshot(&tensors, &path, epoch))
         .map_err(to_py)
 }
@@ -168,8 +180,10 @@ pub fn _torch_write_weights(
 /// term's gradient. Returns `(total, rec, kl, l2)` (weighted by `loss_weights` = (rec, kl,
 /// l2); the L2 term of the weights before the step), every variable after the step, and the
 /// gradient of rec + kl (the L2 term's, w_l2 · θ, is Adam's to add) of every trained variable.
+/// `double` runs the engine in f64 (inputs read, results returned as float64), which takes
+/// rounding out of a comparison with another implementation.
 #[pyfunction]
-#[pyo3(signature = (model, tensors, x, eps, labels, lr, betas, adam_eps, loss_weights))]
+#[pyo3(signature = (model, tensors, x, eps, labels, lr, betas, adam_eps, loss_weights, double=false))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn _torch_engine_step<'py>(
     py: Python<'py>,
@@ -182,20 +196,23 @@ pub fn _torch_engine_step<'py>(
     betas: (f64, f64),
     adam_eps: f64,
     loss_weights: (f64, f64, f64),
+    double: bool,
 ) -> PyResult<((f64, f64, f64, f64), Bound<'py, PyDict>, Bound<'py, PyDict>)> {
     let trained = model.trained();
-    let tensors = model_tensors(model, tensors)?;
-    let x = to_tensor(x, "x")?;
-    let eps = to_tensor(eps, "eps")?;
-    let labels = labels.map(|l| to_tensor(l, "labels")).transpose()?;
+    let dtype = if double { DType::F64 } else { DType::F32 };
+    let tensors = model_tensors(model, tensors, dtype)?;
+    let x = to_tensor(x, "x", dtype)?;
+    let eps = to_tensor(eps, "eps", dtype)?;
+    let labels = labels.map(|l| to_tensor(l, "labels", dtype)).transpose()?;
     let batch = x.dims().first().copied().unwrap_or(0);
     let (terms, after, grads) = py
         .detach(|| -> meshvae::Result<_> {
             let spec = &trained.spec;
-            let mut net = meshvae::MeshVae::new(
+            let mut net = meshvae::MeshVae::with_dtype(
                 &spec.model,
                 &trained.hierarchy,
                 &Device::Cpu,
+                dtype,
                 spec.train.seed,
             )?;
             net.set_tensors(&tensors, &trained.folder.dir)?;

@@ -27,6 +27,20 @@ def test_horse_pooling_matrix(horse_hierarchy):
     np.testing.assert_array_equal(cluster[cols], rows)
 
 
+def test_matrices_in_float64_are_the_float32_ones_unrounded(horse_hierarchy):
+    for get in (horse_hierarchy.laplacian, horse_hierarchy.pooling, horse_hierarchy.depooling):
+        narrow, wide = get(0), get(0, dtype="float64")
+        assert narrow.dtype == np.float32 and wide.dtype == np.float64, get
+        assert get(0, dtype="float32").dtype == np.float32
+        np.testing.assert_array_equal(narrow.indices, wide.indices)
+        np.testing.assert_array_equal(narrow.data, wide.data.astype(np.float32))
+    # 1/3 and its kin: the Laplacian holds values float32 cannot keep.
+    lap = horse_hierarchy.laplacian(0, dtype="float64")
+    assert (lap.data != lap.data.astype(np.float32)).any()
+    with pytest.raises(meshvae.InputError, match="dtype"):
+        horse_hierarchy.laplacian(0, dtype="float16")
+
+
 def test_horse_scipy_pooling_equals_the_rust_pooling(horse_hierarchy, horse_features):
     x = horse_features[:6]  # [6, 8431, 9] raw ACAP features
     ours = horse_hierarchy.pool(0, x)

@@ -23,9 +23,9 @@ from meshvae.torch import (  # noqa: E402
     MeshBatchNorm,
     MeshVAE,
     Pool,
-    _engine_step,
-    _TiedChebConv,
 )
+from meshvae.torch.folder import engine_step as _engine_step  # noqa: E402
+from meshvae.torch.layers import _TiedChebConv  # noqa: E402
 from conftest import run_cli  # noqa: E402
 
 @pytest.fixture(autouse=True, scope="module")
@@ -316,17 +316,19 @@ def test_save_writes_a_folder_the_cli_evaluates(cli, horse_torch, horse_model, h
     assert relative(mu.cpu(), mu_rust) < 1e-5
 
 
-def test_one_torch_step_equals_one_engine_step(horse_torch, horse_model, horse):
-    """The same batch, weights, noise and learning rate as one step of meshvae train's CPU
-    engine: the loss terms and the gradients agree, and so do the weights after Adam's step,
-    bar the few entries whose gradient is rounding noise (Adam's first step moves every weight
-    by about ±lr whatever its gradient's size, so there the sign of the noise decides)."""
+def _one_step_each(horse_torch, horse_model, horse, double):
+    """One torch step and one engine step from the same batch, weights, noise and learning
+    rate; returns the loss terms of both, and per variable (torch's state after the step,
+    the engine's, torch's parameter or None for a running statistic, torch's gradient of rec +
+    kl, the engine's)."""
     split = json.loads((horse_model / "split.json").read_text())
-    model = copy.deepcopy(horse_torch)
-    x = model.features(horse.positions[split["train"][:12]])
+    dtype = torch.float64 if double else torch.float32
+    model = MeshVAE.from_folder(horse_model, dtype=dtype) if double else copy.deepcopy(horse_torch)
+    x = model.features(horse.positions[split["train"][:12]]).to(dtype)
     eps = torch.randn(len(x), model.latent, generator=torch.Generator().manual_seed(5))
+    eps = eps.to(dtype)
     lr, betas = 1e-3, (0.9, 0.95)
-    terms, after, grads = _engine_step(model, x, eps, lr, betas)
+    terms, after, grads = _engine_step(model, x, eps, lr, betas, double=double)
     model.train()
     before = {name: p.detach().clone() for name, p in model.named_parameters()}
     optimizer = torch.optim.Adam(model.parameters(), lr=lr, betas=betas, eps=1e-8)
@@ -334,34 +336,73 @@ def test_one_torch_step_equals_one_engine_step(horse_torch, horse_model, horse):
     optimizer.zero_grad()
     loss.total.backward()
     optimizer.step()
-    got_terms = [float(t.detach()) for t in loss]
-    worst_term = max(abs(g - w) / abs(w) for g, w in zip(got_terms, terms))
-    assert worst_term < 1e-5, (got_terms, terms)
     params = dict(model.named_parameters())
     state = model.state_dict()
     assert set(after) == set(state) and set(grads) == set(params)
-    worst_grad = worst_weight = 0.0
-    flipped = 0
+    variables = {}
     for name, want in after.items():
-        diff = np.abs(state[name].numpy() - want)
-        if name not in params:  # batch norm's running statistics
+        assert want.dtype == (np.float64 if double else np.float32), (name, want.dtype)
+        p = params.get(name)
+        # torch's gradient holds the L2 term's w_l2 · θ, which the engine leaves to Adam.
+        grad = None if p is None else p.grad.numpy() - model.loss_weights.l2 * before[name].numpy()
+        variables[name] = (state[name].numpy(), want, p, grad, grads.get(name))
+    return [float(t.detach()) for t in loss], terms, variables
+
+
+def test_one_torch_step_equals_one_engine_step(horse_torch, horse_model, horse):
+    """The same batch, weights, noise and learning rate as one step of meshvae train's CPU
+    engine, both in float32 (how each trains): the loss terms and the gradients agree, and so
+    do the weights after Adam's step, bar the few entries whose gradient is rounding noise
+    (Adam's first step moves every weight by about ±lr whatever its gradient's size, so there
+    the sign of the noise decides; the float64 test below has none)."""
+    got_terms, terms, variables = _one_step_each(horse_torch, horse_model, horse, False)
+    worst_term = max(abs(g - w) / abs(w) for g, w in zip(got_terms, terms))
+    assert worst_term < 1e-5, (got_terms, terms)
+    worst_grad = worst_weight = 0.0
+    flipped = total = 0
+    for name, (got, want, param, grad, want_grad) in variables.items():
+        diff = np.abs(got - want)
+        if param is None:  # batch norm's running statistics
             assert diff.max() < 1e-5, (name, diff.max())
             continue
-        # torch's gradient holds the L2 term's w_l2 · θ, which the engine leaves to Adam.
-        grad = params[name].grad.numpy() - model.loss_weights.l2 * before[name].numpy()
-        grad_error = np.abs(grad - grads[name]).max() / np.abs(grads[name]).max()
+        grad_error = np.abs(grad - want_grad).max() / np.abs(want_grad).max()
         worst_grad = max(worst_grad, grad_error)
         assert grad_error < 5e-5, (name, grad_error)
-        total_grad = np.abs(params[name].grad.numpy())
+        total_grad = np.abs(param.grad.numpy())
         noise = total_grad < 1e-5 * np.median(total_grad)
         assert (diff[~noise] < 1e-5).all(), (name, diff[~noise].max())
         worst_weight = max(worst_weight, float(diff[~noise].max()))
         flipped += int((diff[noise] >= 1e-5).sum())
+        total += diff.size
     print(
-        f"\none step: loss terms {worst_term:.1e} (relative), gradients {worst_grad:.1e} (relative "
-        f"to each variable's largest), weights {worst_weight:.1e} apart, {flipped} of "
-        f"{sum(p.numel() for p in params.values())} weights with a rounding-noise gradient moved "
-        "the other way"
+        f"\nfloat32 step: loss terms {worst_term:.1e} (relative), gradients {worst_grad:.1e} "
+        f"(relative to each variable's largest), weights {worst_weight:.1e} apart, {flipped} of "
+        f"{total} weights with a rounding-noise gradient moved the other way"
+    )
+
+
+def test_one_float64_torch_step_equals_one_engine_step(horse_torch, horse_model, horse):
+    """The same step with both sides in float64 (the torch model and its operators, and the
+    engine): every loss term to 1e-5 relative and every variable after the step to 1e-5, with
+    no exception: without float32's rounding noise no gradient's sign is left to chance."""
+    got_terms, terms, variables = _one_step_each(horse_torch, horse_model, horse, True)
+    worst_term = max(abs(g - w) / abs(w) for g, w in zip(got_terms, terms))
+    assert worst_term < 1e-5, (got_terms, terms)
+    worst_grad = worst_weight = 0.0
+    total = 0
+    for name, (got, want, param, grad, want_grad) in variables.items():
+        diff = float(np.abs(got - want).max())
+        worst_weight = max(worst_weight, diff)
+        total += got.size
+        assert diff < 1e-5, (name, diff)
+        if param is not None:
+            grad_error = np.abs(grad - want_grad).max() / np.abs(want_grad).max()
+            worst_grad = max(worst_grad, grad_error)
+            assert grad_error < 1e-5, (name, grad_error)
+    print(
+        f"\nfloat64 step: loss terms {worst_term:.1e} (relative), gradients {worst_grad:.1e} "
+        f"(relative to each variable's largest), all {total} variables within "
+        f"{worst_weight:.1e} after the step"
     )
 
 

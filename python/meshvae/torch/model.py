@@ -1,57 +1,19 @@
-"""meshvae's network as PyTorch modules (needs torch: ``pip install torch``).
-
-The layers and the whole network of the paper as ``meshvae train`` builds them, computing
-what the Rust model computes (crates/meshvae: ``net/plan.rs``, ``candle/model``), on batches
-``[B, V, C]`` on any torch device:
-
-- :class:`ChebConv`: Chebyshev graph convolution on a level's rescaled Laplacian L̃;
-- :class:`Pool`, :class:`DePool`: a hierarchy's pooling and de-pooling operators (sparse
-  products; the ``max`` and ``graph`` poolers' maxima included);
-- :class:`MeshBatchNorm`: batch norm over the batch and vertex axes, per channel;
-- :class:`MeshVAE`: the network and its loss; :meth:`MeshVAE.from_folder` loads a model folder
-  written by ``meshvae train``, :meth:`MeshVAE.save` writes one that every ``meshvae`` command
-  reads.
-
-Sparse operators are ``torch.sparse`` COO tensors held as non-persistent buffers: they move
-with ``.to(device)`` but are not in ``state_dict()``, whose keys and shapes are exactly the
-variables of a ``weights.safetensors`` (``enc.conv0.weight``, ``enc.bn0.running_mean``, …).
-"""
+"""The paper's whole network, :class:`MeshVAE`, and its loss, built from :mod:`.layers` as
+``meshvae train`` builds it."""
 
 from __future__ import annotations
 
-import json
 import os
-import shutil
 from pathlib import Path
 from typing import Any, Mapping, NamedTuple, Sequence, Union, cast
 
-try:
-    import torch
-    from torch import Tensor, nn
-except ImportError as _error:  # pragma: no cover - exercised by a subprocess test
-    raise ImportError(
-        "meshvae.torch needs PyTorch, which is not installed: pip install torch "
-        "(the rest of meshvae works without it)"
-    ) from _error
-
 import numpy as np
+import torch
+from torch import Tensor, nn
 
-from . import _meshvae
-from ._meshvae import Hierarchy, Model, Normalization
-
-__all__ = [
-    "ChebConv",
-    "DEFAULT_CONFIG",
-    "DePool",
-    "LABEL_SCALE",
-    "Loss",
-    "LossWeights",
-    "MeshBatchNorm",
-    "MeshVAE",
-    "Output",
-    "Pool",
-    "sparse_tensor",
-]
+from .. import _meshvae
+from .._meshvae import Hierarchy, Model, Normalization
+from .layers import ChebConv, DePool, MeshBatchNorm, Pool, _host_dtype, _pool_mode, _TiedChebConv
 
 #: ``ModelConfig::default()`` (crates/meshvae/src/net/config.rs): the paper's network as the
 #: authors' code runs it. Keys as in a model folder's ``config.json`` (``"model"``).
@@ -73,37 +35,9 @@ DEFAULT_CONFIG: dict[str, Any] = {
 FEATURE_CHANNELS = 9
 #: The value of a one-hot label's active entry (crates/meshvae/src/candle/model/cond.rs).
 LABEL_SCALE = 8.0
-#: Batch norm's ε and the decay of its running statistics (net/batch_norm.rs).
-BN_EPS = 1e-5
-BN_DECAY = 0.9
 #: ε in log(ε + σ²) of the KL term (net/latent.rs).
 KL_VAR_EPS = 1e-8
 
-#: How each pooler's operators apply (mesh-hierarchy's ``Pooler::mode``).
-POOL_MODES = {
-    "mean": "mean",
-    "ours": "mean",
-    "qem": "mean",
-    "remesh": "mean",
-    "sampling": "mean",  # the product keeps the survivors; de-pooling is barycentric
-    "max": "signed_max",
-    "graph": "max",
-    "none": "identity",
-}
-
-#: The files of a model folder that :meth:`MeshVAE.save` copies from the source folder (the
-#: weights are written; the training run's log, status, checkpoint and plot are not copied:
-#: they describe the source's training, not these weights).
-COPIED_FILES = (
-    "config.json",
-    "hierarchy.safetensors",
-    "hierarchy.json",
-    "normalization.json",
-    "split.json",
-    "template.obj",
-)
-
-_Sparse = Any  # a scipy.sparse matrix or a torch sparse tensor
 _Labels = Union[Sequence[str], Tensor, None]
 _PathLike = Union[str, "os.PathLike[str]"]
 
@@ -141,272 +75,6 @@ class Output(NamedTuple):
     """The posterior's standard deviation [B, latent], in (0, √2)."""
 
 
-def sparse_tensor(matrix: _Sparse, dtype: torch.dtype = torch.float32) -> Tensor:
-    """A ``scipy.sparse`` matrix (as :class:`meshvae.Hierarchy` gives them) as a coalesced
-    ``torch.sparse_coo_tensor`` of ``dtype``; a torch sparse tensor is converted."""
-    if isinstance(matrix, Tensor):
-        if not matrix.is_sparse:
-            matrix = matrix.to_sparse()
-        return matrix.to(dtype).coalesce()
-    coo = matrix.tocoo()
-    indices = torch.from_numpy(np.vstack([coo.row, coo.col]).astype(np.int64))
-    values = torch.from_numpy(np.asarray(coo.data)).to(dtype)
-    return torch.sparse_coo_tensor(indices, values, coo.shape, check_invariants=True).coalesce()
-
-
-def _product(op: Tensor, h: Tensor) -> Tensor:
-    """op [n, m] (sparse) times h [m, ...] (vertex-major): [n, ...]."""
-    rest = h.shape[1:]
-    flat = h.reshape(h.shape[0], -1)
-    return torch.sparse.mm(op, flat).reshape(op.shape[0], *rest)
-
-
-def _vertex_major(module: Any, x: Tensor) -> Tensor:
-    """Runs ``module.forward_vertex_major`` on x [B, V, C] (or [V, C])."""
-    if x.dim() == 2:
-        return module.forward_vertex_major(x.unsqueeze(1)).squeeze(1)
-    if x.dim() != 3:
-        raise ValueError(f"x: expected [B, V, C] or [V, C], got shape {tuple(x.shape)}")
-    return module.forward_vertex_major(x.transpose(0, 1)).transpose(0, 1)
-
-
-def _chebyshev(op: Tensor, weight: Tensor, k: int, h: Tensor) -> Tensor:
-    """Σ_{k<K} T_k(op) h W_k for h [V, B, C_in] and weight [C_in·K, C_out] (row c·K + k):
-    T_0 h = h, T_1 h = op h, T_k h = 2 op T_{k−1} h − T_{k−2} h."""
-    v, b, c_in = h.shape
-    if c_in * k != weight.shape[0]:
-        raise ValueError(
-            f"input of {c_in} channels; the convolution expects {weight.shape[0] // k}"
-        )
-    flat = h.reshape(v, b * c_in)
-    terms = [flat]
-    for order in range(1, k):
-        lx = torch.sparse.mm(op, terms[-1])
-        terms.append(lx if order == 1 else 2.0 * lx - terms[-2])
-    stacked = torch.stack(terms, dim=-1).reshape(v * b, c_in * k)
-    return (stacked @ weight).reshape(v, b, weight.shape[1])
-
-
-class ChebConv(nn.Module):
-    """Chebyshev graph convolution y = Σ_{k<K} T_k(L̃) x W_k (+ b), as spectral-conv's
-    ``ChebConv`` (crates/spectral-conv/src/cheb.rs): T_0 x = x, T_1 x = L̃x,
-    T_k x = 2L̃ T_{k−1} x − T_{k−2} x.
-
-    ``laplacian``: the rescaled Laplacian L̃ of a level (``Hierarchy.laplacian(level)``), V×V,
-    scipy or torch sparse; held as a sparse buffer (not in ``state_dict``). ``weight`` is
-    ``[in_channels·K, out_channels]`` with row ``c·K + k`` for input channel c and order k (the
-    layout of a model folder's ``enc.conv{i}.weight``), drawn from N(0, init_std²). The bias is
-    optional (zero-initialised); the paper's network has none (batch norm's β is its offset).
-    Input [B, V, C_in] (or [V, C_in]), output [B, V, C_out].
-    """
-
-    laplacian: Tensor
-
-    def __init__(
-        self,
-        laplacian: _Sparse,
-        in_channels: int,
-        out_channels: int,
-        K: int = 3,
-        bias: bool = False,
-        init_std: float = 0.02,
-    ) -> None:
-        super().__init__()
-        if K < 1 or in_channels < 1 or out_channels < 1:
-            raise ValueError("ChebConv: K, in_channels and out_channels must be at least 1")
-        op = sparse_tensor(laplacian)
-        if op.shape[0] != op.shape[1]:
-            raise ValueError(f"laplacian: expected a square matrix, got shape {tuple(op.shape)}")
-        self.register_buffer("laplacian", op, persistent=False)
-        self.K = K
-        self.in_channels = in_channels
-        self.out_channels = out_channels
-        self.weight = nn.Parameter(torch.randn(in_channels * K, out_channels) * init_std)
-        if bias:
-            self.bias: nn.Parameter | None = nn.Parameter(torch.zeros(out_channels))
-        else:
-            self.register_parameter("bias", None)
-
-    def forward_vertex_major(self, h: Tensor) -> Tensor:
-        """h [V, B, C_in] → [V, B, C_out] (the layout :class:`MeshVAE` keeps)."""
-        y = _chebyshev(self.laplacian, self.weight, self.K, h)
-        return y if self.bias is None else y + self.bias
-
-    def forward(self, x: Tensor) -> Tensor:
-        return _vertex_major(self, x)
-
-    def extra_repr(self) -> str:
-        v = self.laplacian.shape[0]
-        return f"V={v}, {self.in_channels} -> {self.out_channels}, K={self.K}, bias={self.bias is not None}"
-
-
-class _TiedChebConv(nn.Module):
-    """A decoder convolution tied to encoder convolution ``source`` (``tie_decoder_convs``):
-    its adjoint on L̃ᵀ, Σ_k T_k(L̃ᵀ) Y W_kᵀ (per-order blocks of W transposed)."""
-
-    op_t: Tensor
-
-    def __init__(self, source: ChebConv) -> None:
-        super().__init__()
-        # Not a submodule: the weight belongs to the encoder (one variable, one state_dict key).
-        object.__setattr__(self, "_source", source)
-        self.register_buffer("op_t", source.laplacian.t().coalesce(), persistent=False)
-
-    def forward_vertex_major(self, h: Tensor) -> Tensor:
-        src: ChebConv = self._source  # type: ignore[assignment]
-        k, c_in, c_out = src.K, src.in_channels, src.out_channels
-        w = src.weight.reshape(c_in, k, c_out).permute(2, 1, 0).reshape(c_out * k, c_in)
-        return _chebyshev(self.op_t, w, k, h)
-
-    def forward(self, x: Tensor) -> Tensor:
-        return _vertex_major(self, x)
-
-
-class MeshBatchNorm(nn.Module):
-    """Batch norm with one mean and variance per channel over the batch **and** vertex axes
-    (crates/meshvae/src/candle/batch_norm.rs): y = γ (x − m) / √(v + ε) + β, ε = 1e-5.
-
-    Training mode uses the batch's moments (biased variance, summed in float64) and moves the
-    running statistics r ← 0.9·r + 0.1·batch; eval mode uses the running statistics. Variables:
-    ``gamma``, ``beta`` (trained), ``running_mean``, ``running_var`` (buffers). Input [..., C].
-    """
-
-    running_mean: Tensor
-    running_var: Tensor
-
-    def __init__(self, channels: int, eps: float = BN_EPS, decay: float = BN_DECAY) -> None:
-        super().__init__()
-        self.channels = channels
-        self.eps = eps
-        self.decay = decay
-        self.gamma = nn.Parameter(torch.ones(channels))
-        self.beta = nn.Parameter(torch.zeros(channels))
-        self.register_buffer("running_mean", torch.zeros(channels))
-        self.register_buffer("running_var", torch.ones(channels))
-
-    def forward(self, x: Tensor) -> Tensor:
-        if x.shape[-1] != self.channels or x.numel() == 0:
-            raise ValueError(
-                f"x: expected a non-empty [..., {self.channels}], got shape {tuple(x.shape)}"
-            )
-        flat = x.reshape(-1, self.channels)
-        if self.training:
-            wide = flat.double()
-            mean64 = wide.mean(0)
-            var64 = (wide - mean64).square().mean(0)
-            mean, var = mean64.to(flat.dtype), var64.to(flat.dtype)
-            with torch.no_grad():
-                d = self.decay
-                self.running_mean.copy_(self.running_mean * d + mean.detach() * (1.0 - d))
-                self.running_var.copy_(self.running_var * d + var.detach() * (1.0 - d))
-        else:
-            mean, var = self.running_mean, self.running_var
-        scale = torch.reciprocal(torch.sqrt(var + self.eps)) * self.gamma
-        return ((flat - mean) * scale + self.beta).reshape(x.shape)
-
-    def extra_repr(self) -> str:
-        return f"{self.channels}, eps={self.eps}, decay={self.decay}"
-
-
-def _pool_mode(kind: str) -> str:
-    try:
-        return POOL_MODES[kind]
-    except KeyError:
-        raise ValueError(
-            f"pool: {kind!r} is not one of {', '.join(sorted(POOL_MODES))}"
-        ) from None
-
-
-class Pool(nn.Module):
-    """Pooling from a level to the next coarser one with a hierarchy's pooling matrix P (m×n,
-    ``Hierarchy.pooling(step)``), applied as the pooler says (``mode``; or use
-    :meth:`from_hierarchy`, which reads it from the hierarchy):
-
-    - ``"mean"`` (the poolers ``mean``, ``qem``, ``remesh``, ``sampling``): coarse = P · fine;
-    - ``"signed_max"`` (``max``): per row of P, the member of largest magnitude with its sign
-      (ties: the negative one);
-    - ``"max"`` (``graph``): per row of P, the largest value;
-    - ``"identity"`` (``none``): the input.
-
-    For the maxima the gradient goes to the selected member (shared evenly among exact ties,
-    where the Rust network picks one). Input [B, n, C] (or [n, C]), output [B, m, C].
-    """
-
-    matrix: Tensor
-    rows: Tensor
-    cols: Tensor
-
-    def __init__(self, matrix: _Sparse, mode: str = "mean") -> None:
-        super().__init__()
-        if mode not in ("mean", "signed_max", "max", "identity"):
-            raise ValueError(f"mode: {mode!r} is not mean, signed_max, max or identity")
-        self.mode = mode
-        op = sparse_tensor(matrix)
-        self.register_buffer("matrix", op, persistent=False)
-        indices = op.indices()
-        self.register_buffer("rows", indices[0].clone(), persistent=False)
-        self.register_buffer("cols", indices[1].clone(), persistent=False)
-
-    @classmethod
-    def from_hierarchy(cls, hierarchy: Hierarchy, step: int) -> "Pool":
-        """The pooling of ``step`` (level ``step`` → ``step + 1``) as ``hierarchy``'s pooler
-        applies it."""
-        return cls(hierarchy.pooling(step), _pool_mode(hierarchy.pool_kind))
-
-    def forward_vertex_major(self, h: Tensor) -> Tensor:
-        """h [n, B, C] → [m, B, C]."""
-        if self.mode == "identity":
-            return h
-        if self.mode == "mean":
-            return _product(self.matrix, h)
-        m = self.matrix.shape[0]
-        members = h.index_select(0, self.cols)
-        index = self.rows.view(-1, *([1] * (h.dim() - 1))).expand_as(members)
-        empty = h.new_zeros((m, *h.shape[1:]))
-        hi = empty.scatter_reduce(0, index, members, "amax", include_self=False)
-        if self.mode == "max":
-            return hi
-        lo = empty.scatter_reduce(0, index, members, "amin", include_self=False)
-        return torch.where(-lo >= hi, lo, hi)
-
-    def forward(self, x: Tensor) -> Tensor:
-        return _vertex_major(self, x)
-
-    def extra_repr(self) -> str:
-        m, n = self.matrix.shape
-        return f"{n} -> {m}, mode={self.mode}"
-
-
-class DePool(nn.Module):
-    """De-pooling back to the finer level with a hierarchy's de-pooling matrix D (n×m,
-    ``Hierarchy.depooling(step)``): fine = D · coarse (for every pooler but ``none``, whose
-    de-pooling is the identity). Input [B, m, C] (or [m, C]), output [B, n, C]."""
-
-    matrix: Tensor
-
-    def __init__(self, matrix: _Sparse, identity: bool = False) -> None:
-        super().__init__()
-        self.identity = identity
-        self.register_buffer("matrix", sparse_tensor(matrix), persistent=False)
-
-    @classmethod
-    def from_hierarchy(cls, hierarchy: Hierarchy, step: int) -> "DePool":
-        """The de-pooling of ``step`` (level ``step + 1`` → ``step``) of ``hierarchy``."""
-        identity = _pool_mode(hierarchy.pool_kind) == "identity"
-        return cls(hierarchy.depooling(step), identity=identity)
-
-    def forward_vertex_major(self, h: Tensor) -> Tensor:
-        """h [m, B, C] → [n, B, C]."""
-        return h if self.identity else _product(self.matrix, h)
-
-    def forward(self, x: Tensor) -> Tensor:
-        return _vertex_major(self, x)
-
-    def extra_repr(self) -> str:
-        n, m = self.matrix.shape
-        return f"{m} -> {n}" + (", identity" if self.identity else "")
-
-
 class _ConvBlock:
     """conv → [batch norm] → [tanh], vertex-major. Not a module: the convolution and batch
     norm are registered under their variable names by :class:`MeshVAE`."""
@@ -427,22 +95,24 @@ class _Head(nn.Module):
     """A dense head: ``weight`` [width, latent], ``bias`` [latent] and, for a conditional
     model, ``label_weight`` [labels, latent]."""
 
-    def __init__(self, width: int, latent: int, labels: int, init_std: float) -> None:
+    def __init__(
+        self, width: int, latent: int, labels: int, init_std: float, dtype: torch.dtype
+    ) -> None:
         super().__init__()
-        self.weight = nn.Parameter(torch.randn(width, latent) * init_std)
-        self.bias = nn.Parameter(torch.zeros(latent))
+        self.weight = nn.Parameter(torch.randn(width, latent, dtype=dtype) * init_std)
+        self.bias = nn.Parameter(torch.zeros(latent, dtype=dtype))
         if labels:
-            self.label_weight = nn.Parameter(torch.zeros(labels, latent))
+            self.label_weight = nn.Parameter(torch.zeros(labels, latent, dtype=dtype))
 
 
 class _DecoderFc(nn.Module):
     """The decoder's dense layer z W_μᵀ + b (+ c W_dc): its weight is the μ head's."""
 
-    def __init__(self, width: int, labels: int) -> None:
+    def __init__(self, width: int, labels: int, dtype: torch.dtype) -> None:
         super().__init__()
-        self.bias = nn.Parameter(torch.zeros(width))
+        self.bias = nn.Parameter(torch.zeros(width, dtype=dtype))
         if labels:
-            self.label_weight = nn.Parameter(torch.zeros(labels, width))
+            self.label_weight = nn.Parameter(torch.zeros(labels, width, dtype=dtype))
 
 
 def _parse_structure(structure: str) -> list[str]:
@@ -481,7 +151,8 @@ class MeshVAE(nn.Module):
     built here (NotImplementedError).
 
     ``loss_weights``: the weights of :meth:`loss` (default 40 / 3 / 1, the folder's own for
-    :meth:`from_folder`).
+    :meth:`from_folder`). ``dtype``: of every variable and operator (float32, as ``meshvae
+    train``; float64 takes the hierarchy's operators as computed).
     """
 
     def __init__(
@@ -490,6 +161,7 @@ class MeshVAE(nn.Module):
         config: Mapping[str, Any] | None = None,
         *,
         loss_weights: LossWeights | Mapping[str, float] | None = None,
+        dtype: torch.dtype = torch.float32,
         **overrides: Any,
     ) -> None:
         super().__init__()
@@ -539,7 +211,10 @@ class MeshVAE(nn.Module):
         self.loss_weights = _loss_weights(loss_weights)
         identity = _pool_mode(hierarchy.pool_kind) == "identity"
         # Without pooling every level is the template: level 0's operator serves all.
-        laplacians = [hierarchy.laplacian(0 if identity else l) for l in range(pools + 1)]
+        host = _host_dtype(dtype)
+        laplacians = [
+            hierarchy.laplacian(0 if identity else l, dtype=host) for l in range(pools + 1)
+        ]
         init_std = float(cfg["init_std"])
         flat = self.vertex_counts[-1] * self.channels
 
@@ -564,20 +239,22 @@ class MeshVAE(nn.Module):
         for layer in layers:
             if layer == "P":
                 name = f"pool{level}"
-                enc[name] = Pool.from_hierarchy(hierarchy, level)
+                enc[name] = Pool.from_hierarchy(hierarchy, level, dtype)
                 self._encoder.append(enc[name])
                 level += 1
                 continue
             index, lvl, c_in, c_out, bn, tanh = next(convs)
-            enc_conv = ChebConv(laplacians[lvl], c_in, c_out, self.K, init_std=init_std)
+            enc_conv = ChebConv(
+                laplacians[lvl], c_in, c_out, self.K, init_std=init_std, dtype=dtype
+            )
             enc[f"conv{index}"] = enc_conv
-            norm = MeshBatchNorm(c_out) if bn else None
+            norm = MeshBatchNorm(c_out, dtype=dtype) if bn else None
             if norm is not None:
                 enc[f"bn{index}"] = norm
             self._encoder.append(_ConvBlock(enc_conv, norm, tanh))
-        enc["mu"] = _Head(flat, self.latent, len(labels), init_std)
-        enc["sigma"] = _Head(flat, self.latent, len(labels), init_std)
-        dec["fc"] = _DecoderFc(flat, len(labels))
+        enc["mu"] = _Head(flat, self.latent, len(labels), init_std, dtype)
+        enc["sigma"] = _Head(flat, self.latent, len(labels), init_std, dtype)
+        dec["fc"] = _DecoderFc(flat, len(labels), dtype)
 
         self._decoder: list[Any] = []
         tied = bool(cfg["tie_decoder_convs"])
@@ -586,7 +263,7 @@ class MeshVAE(nn.Module):
             if layer == "P":
                 level -= 1
                 name = f"depool{level}"
-                dec[name] = DePool.from_hierarchy(hierarchy, level)
+                dec[name] = DePool.from_hierarchy(hierarchy, level, dtype)
                 self._decoder.append(dec[name])
                 continue
             index, lvl, c_in, c_out, _, _ = next(mirrored)
@@ -595,9 +272,11 @@ class MeshVAE(nn.Module):
                 conv: nn.Module = _TiedChebConv(cast(ChebConv, enc[f"conv{index}"]))
                 dec[f"tied{index}"] = conv  # its buffer only: the weight is the encoder's
             else:
-                conv = ChebConv(laplacians[lvl], c_out, c_in, self.K, init_std=init_std)
+                conv = ChebConv(
+                    laplacians[lvl], c_out, c_in, self.K, init_std=init_std, dtype=dtype
+                )
                 dec[f"conv{index}"] = conv
-            norm = MeshBatchNorm(c_in) if bn else None
+            norm = MeshBatchNorm(c_in, dtype=dtype) if bn else None
             if norm is not None:
                 dec[f"bn{index}"] = norm
             self._decoder.append(_ConvBlock(conv, norm, True))
@@ -620,44 +299,20 @@ class MeshVAE(nn.Module):
 
     @classmethod
     def from_folder(
-        cls, path: _PathLike, device: torch.device | str | None = None
+        cls,
+        path: _PathLike,
+        device: torch.device | str | None = None,
+        dtype: torch.dtype = torch.float32,
     ) -> "MeshVAE":
         """The model of a folder written by ``meshvae train`` (its best weights, batch norm's
         running statistics included; ``meshvae.Model.load`` reads it), in eval mode, on
-        ``device`` (default CPU). Its normalisation and template come along
-        (:meth:`features`, :meth:`positions`), and :meth:`save` copies the folder's other
-        files. Models of the other networks (``--net tan2018|coma|spiralnet``) raise
-        NotImplementedError."""
-        def refuse_other_networks(model_config: Mapping[str, Any]) -> None:
-            net = model_config.get("net", "ours")
-            if net != "ours":
-                raise NotImplementedError(
-                    f"{path}: a {net} model (trained with --net {net}); meshvae.torch builds "
-                    "the paper's network only. Use meshvae.Model.load for its encoder and "
-                    "decoder."
-                )
+        ``device`` (default CPU), its variables and operators of ``dtype``. Its normalisation
+        and template come along (:meth:`features`, :meth:`positions`), and :meth:`save`
+        copies the folder's other files. Models of the other networks (``--net
+        tan2018|coma|spiralnet``) raise NotImplementedError."""
+        from .folder import load  # folder.py imports this module
 
-        config_file = Path(path) / "config.json"
-        if config_file.is_file():  # refused before its weights are read
-            try:
-                refuse_other_networks(json.loads(config_file.read_text()).get("model", {}))
-            except (ValueError, AttributeError):
-                pass  # unreadable: Model.load says why
-        source = Model.load(path)
-        spec = source.config
-        model_config = dict(spec["model"])
-        refuse_other_networks(model_config)
-        tensors, hierarchy, normalization = _meshvae._torch_model_state(source)
-        model = cls(hierarchy, model_config, loss_weights=spec["train"]["loss"])
-        state = {name: torch.from_numpy(np.asarray(a)) for name, a in tensors.items()}
-        model.load_state_dict(state, strict=True)
-        model._folder = Path(source.path)
-        model._source_cache = source
-        model.normalization = normalization
-        model.template = source.template
-        model.faces = source.faces
-        model.eval()
-        return model.to(device) if device is not None else model
+        return load(cls, path, device, dtype)
 
     @property
     def folder(self) -> Path | None:
@@ -698,51 +353,9 @@ class MeshVAE(nn.Module):
         Written into a temporary folder beside ``path`` and renamed, so ``path`` is never
         half-written; an existing ``path`` is replaced only with ``overwrite=True``. Returns
         the folder."""
-        path = Path(path)
-        source = Model.load(like) if like is not None else self.source
-        if source is None:
-            raise ValueError(
-                "save: the model did not come from a model folder; give like= a folder of "
-                "the same configuration (trained by meshvae train) to copy the other files from"
-            )
-        ours = {k: v for k, v in self.config.items() if k != "net"}
-        theirs = {**DEFAULT_CONFIG, **{k: v for k, v in source.config["model"].items() if k != "net"}}
-        if theirs.get("pool") == "ours":
-            theirs["pool"] = "mean"
-        if ours != theirs:
-            diff = {k: (theirs.get(k), ours.get(k)) for k in ours if ours.get(k) != theirs.get(k)}
-            raise ValueError(
-                f"save: the source folder {source.path} holds another configuration "
-                f"(folder, this model): {diff}"
-            )
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path}: exists (pass overwrite=True to replace it)")
-        tensors = {
-            name: t.detach().to("cpu", torch.float32).contiguous().numpy()
-            for name, t in self.state_dict().items()
-        }
-        parent = path.resolve().parent
-        parent.mkdir(parents=True, exist_ok=True)
-        tmp = parent / f".{path.name}.{os.getpid()}.tmp"
-        old = parent / f".{path.name}.{os.getpid()}.old"
-        shutil.rmtree(tmp, ignore_errors=True)
-        try:
-            tmp.mkdir()
-            for name in COPIED_FILES:
-                src = Path(source.path) / name
-                if src.is_file():
-                    shutil.copy2(src, tmp / name)
-            _meshvae._torch_write_weights(source, tmp / "weights.safetensors", tensors)
-            if path.exists():
-                path.rename(old)
-            tmp.rename(path)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            if old.exists() and not path.exists():
-                old.rename(path)
-            raise
-        shutil.rmtree(old, ignore_errors=True)
-        return path
+        from .folder import save  # folder.py imports this module
+
+        return save(self, path, like, overwrite)
 
     # ------------------------------------------------------------------ data in and out
 
@@ -773,7 +386,7 @@ class MeshVAE(nn.Module):
             raise ValueError(
                 "positions: set normalization, template and faces (from_folder sets them)"
             )
-        from ._meshvae import reconstruct
+        from .._meshvae import reconstruct
 
         f = x_hat.detach().cpu().float().numpy() if isinstance(x_hat, Tensor) else x_hat
         raw = self.normalization.invert(np.asarray(f, dtype=np.float32))
@@ -923,36 +536,3 @@ def _loss_weights(value: LossWeights | Mapping[str, float] | None) -> LossWeight
     if isinstance(value, LossWeights):
         return value
     return LossWeights(float(value["rec"]), float(value["kl"]), float(value["l2"]))
-
-
-def _engine_step(
-    model: MeshVAE,
-    x: Tensor,
-    eps: Tensor,
-    lr: float,
-    betas: tuple[float, float] = (0.9, 0.999),
-    adam_eps: float = 1e-8,
-    labels: _Labels = None,
-) -> tuple[tuple[float, float, float, float], dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """One step of ``meshvae train``'s CPU engine on a copy of ``model``'s variables (for
-    checks): train-mode forward and backward on x with noise eps, then Adam from zero moments
-    with ``lr`` (no rate scaling, no clipping). Returns ``(total, rec, kl, l2)``, every
-    variable after the step, and the gradient of rec + kl of every trained variable (Adam adds
-    the L2 term's, w_l2 · θ). Needs a model from :meth:`MeshVAE.from_folder`."""
-    source = model.source
-    if source is None:
-        raise ValueError("_engine_step: needs a model from MeshVAE.from_folder")
-    tensors = {k: v.detach().cpu().float().numpy() for k, v in model.state_dict().items()}
-    c = model._conditions(labels, x.shape[0])
-    w = model.loss_weights
-    return _meshvae._torch_engine_step(
-        source,
-        tensors,
-        x.detach().cpu().float().numpy(),
-        eps.detach().cpu().float().numpy(),
-        None if c is None else c.detach().cpu().float().numpy(),
-        lr,
-        betas,
-        adam_eps,
-        (w.rec, w.kl, w.l2),
-    )
