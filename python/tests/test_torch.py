@@ -300,6 +300,7 @@ def test_save_writes_a_folder_the_cli_evaluates(cli, horse_torch, horse_model, h
         assert b.metadata()["format"] == "meshvae-weights"
 
     report = json.loads(run_cli(cli, "eval", out, "--json"))
+    assert report["stop_reason"] == "unrecorded" and report["epochs"] is None  # torch's training
     test_ids = split["test"]
     with torch.no_grad():
         x_hat = model(model.features(horse.positions[test_ids])).x_hat

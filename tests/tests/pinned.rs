@@ -251,30 +251,11 @@ fn horse_gallop_results_are_pinned() {
         },
     ];
     let got: Vec<String> = cases.iter().map(|c| run(&set, c, 50, "horse")).collect();
-    let caches = cache_sizes();
+    let caches = meshvae::Platform::this().caches;
     match HORSE.iter().find(|(c, _)| *c == caches) {
         Some((_, pinned)) => check(&got, pinned),
         None => check_close(&got, &caches),
     }
-}
-
-/// The data caches' sizes, as `gemm` sees them ("L1d 48K L2 2048K L3 307200K"; empty where
-/// the system does not say).
-fn cache_sizes() -> String {
-    let mut out = Vec::new();
-    for index in 0..8 {
-        let dir = Path::new("/sys/devices/system/cpu/cpu0/cache").join(format!("index{index}"));
-        let read = |f: &str| std::fs::read_to_string(dir.join(f)).map(|s| s.trim().to_string());
-        let (Ok(level), Ok(kind), Ok(size)) = (read("level"), read("type"), read("size")) else {
-            continue;
-        };
-        match kind.as_str() {
-            "Data" => out.push(format!("L{level}d {size}")),
-            "Unified" => out.push(format!("L{level} {size}")),
-            _ => {}
-        }
-    }
-    out.join(" ")
 }
 
 /// On a cache configuration without recorded figures: equal to one recorded set, or every
@@ -326,7 +307,7 @@ const SYNTHETIC: &[&str] = &[
     "conditional-engine 28e7b6ac4e339e1e 0.2690607314296441 0.25065463429533186 0.2775406507771589",
 ];
 
-/// As above, per data-cache configuration ([`cache_sizes`]). The first set's machine did not
+/// As above, per data-cache configuration ([`meshvae::Platform`]'s `caches`). The first set's machine did not
 /// record its caches.
 #[allow(clippy::type_complexity)]
 const HORSE: &[(&str, &[&str])] = &[

@@ -39,13 +39,20 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
     let epochs = trained.epochs_trained()?;
     let folder = ModelFolder::new(&args.model);
     let status = meshvae::read_status(&folder)?;
+    // No log and no run.json: weights written by another program (meshvae.torch's `save`),
+    // whose training this folder does not record.
+    let recorded = status.is_some() || folder.log().is_file();
     // Redrawn when missing or older than the log (a run killed before it drew one).
-    let loss_plot = crate::loss_plot::refresh_loss_plot(&folder)
-        .map_err(|e| eprintln!("warning: no loss.png: {e}"))
-        .ok();
+    let loss_plot = match recorded {
+        true => crate::loss_plot::refresh_loss_plot(&folder)
+            .map_err(|e| eprintln!("warning: no loss.png: {e}"))
+            .ok(),
+        false => None,
+    };
     // Models trained before run.json existed: a full log ran its budget.
     let stop_reason = match &status {
         Some(s) => s.stop_reason.as_str(),
+        None if !recorded => "unrecorded",
         None if epochs.0 >= trained.spec.train.epochs => "budget",
         None => "interrupted",
     };
@@ -79,8 +86,8 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
         "mean_shape_rms_rel": report.mean_shape.rms_rel,
         "params": report.params.with_biases,
         "params_without_biases": report.params.without_biases,
-        "epochs": epochs.0,
-        "best_epoch": epochs.1,
+        "epochs": recorded.then_some(epochs.0),
+        "best_epoch": recorded.then_some(epochs.1),
         "selected_on": trained.selected_on.as_str(),
         "stop_reason": stop_reason,
         "steps": status.as_ref().map(|s| s.steps),
@@ -154,13 +161,19 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
     if !net.is_ours() {
         out!("  network      {net}: {}", net.defined_by());
     }
-    out!(
-        "  epochs       {} (weights of epoch {}, chosen on the {} loss; {} validation meshes)",
-        epochs.0,
-        epochs.1,
-        trained.selected_on,
-        trained.split.val.len()
-    );
+    match recorded {
+        true => out!(
+            "  epochs       {} (weights of epoch {}, chosen on the {} loss; {} validation meshes)",
+            epochs.0,
+            epochs.1,
+            trained.selected_on,
+            trained.split.val.len()
+        ),
+        false => out!(
+            "  epochs       unrecorded ({} validation meshes in the split)",
+            trained.split.val.len()
+        ),
+    }
     match &status {
         Some(s) => out!(
             "  stopped      {}{} after {} steps, {:.0} s of training ({} path){}",
@@ -178,6 +191,10 @@ pub fn run_eval(args: &EvalArgs) -> Result<(), CliError> {
             } else {
                 String::new()
             }
+        ),
+        None if !recorded => out!(
+            "  stopped      unrecorded: the folder has no run.json or log.jsonl (weights written \
+             by another program, such as meshvae.torch's save)"
         ),
         None => out!("  stopped      {stop_reason} (a model trained before run.json)"),
     }

@@ -190,6 +190,34 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     let on_test: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(on_test["selected_on"], "test");
     assert_eq!(v["vertices"], 2498);
+    // Weights written by another program (meshvae.torch's save copies these files and writes
+    // the weights): no run.json, no log, and eval says their training is not recorded.
+    let bare = dir.join("bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    for entry in std::fs::read_dir(&model).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_str().unwrap().to_string();
+        let training = [
+            "run.json",
+            "log.jsonl",
+            "loss.png",
+            "checkpoint.safetensors",
+        ];
+        if path.is_file() && !training.contains(&name.as_str()) {
+            std::fs::copy(&path, bare.join(&name)).unwrap();
+        }
+    }
+    let out = meshvae(&["eval", s(&bare)]);
+    let text = ok(&out);
+    assert!(text.contains("stopped      unrecorded"), "{text}");
+    assert!(text.contains("epochs       unrecorded"), "{text}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("loss.png"), "{stderr}");
+    let bare_json: serde_json::Value =
+        serde_json::from_str(&ok(&meshvae(&["eval", s(&bare), "--json"]))).unwrap();
+    assert_eq!(bare_json["stop_reason"], "unrecorded");
+    assert!(bare_json["epochs"].is_null() && bare_json["loss_plot"].is_null());
+    assert_eq!(bare_json["test_rms"], v["test_rms"]);
     assert!(v["test_rms"].as_f64().unwrap() > 0.0);
 
     let rec = dir.join("rec");

@@ -132,5 +132,6 @@ pub use apps::reconstruct::{CopySplit, EvalReport};
 pub use numerics::pca::{
     Pca, centered_gram, distances_from_gram, pca, pca_of_gram, symmetric_eigen,
 };
+pub use numerics::platform::Platform;
 pub use numerics::rng::Rng;
 pub use numerics::tsne::{Calibration, TsneOptions, calibrate, tsne, tsne_cost};

@@ -6,9 +6,9 @@
 
 use super::commit::Commit;
 use super::plan::{self, Run};
-use super::platform::Platform;
 use super::run::{self, Place, RunResult, RunSettings};
 use super::{LoadedSet, ReproError};
+use meshvae::Platform;
 use std::fmt::Write;
 use std::path::Path;
 

@@ -4,7 +4,8 @@
 //!
 //! - [`plan`]: the run table (data sets, columns, protocols) and each run's folder;
 //! - [`run`]: one run — train with resumption, evaluate, record a result JSON;
-//! - [`settings`], [`commit`], [`platform`]: what a record says made it, and what differs from today's;
+//! - [`settings`], [`commit`] (and `meshvae::Platform`, the machine): what a record says made it,
+//!   and what differs from today's;
 //! - [`check`]: `--check RECORD`, one record retrained and compared digit by digit;
 //! - [`stats`]: mean ± std over seeds;
 //! - [`table`]: the markdown;
@@ -24,7 +25,6 @@ pub mod commit;
 pub mod paper;
 pub mod params;
 pub mod plan;
-pub mod platform;
 pub mod run;
 pub mod settings;
 pub mod stats;

@@ -5,10 +5,10 @@
 use super::ReproError;
 use super::commit::Commit;
 use super::plan::{Budget, Run};
-use super::platform::Platform;
 pub use super::settings::{RunSettings, setting_differences};
 use candle_core::Device;
 use mesh_io::MeshSet;
+use meshvae::Platform;
 use meshvae::{
     EpochRecord, ModelConfig, ModelFolder, StopReason, TrainOptions, TrainRequest, TrainedModel,
 };

@@ -1,15 +1,16 @@
-//! Which machine made a record, as far as its numbers depend on it: the SIMD paths the kernels
-//! and the matrix products pick at run time (AVX2 + FMA, AVX-512), and the data caches' sizes,
-//! by which `gemm` blocks its products and so orders its sums. Two machines that differ in
-//! either train the same run to other numbers: a last-bit difference in one step grows over
-//! a thousand steps (on horse-gallop by mesh, seed 2 of ours: test RMS 0.0220 on one machine,
-//! 0.0249 on another, same code and settings).
+//! [`Platform`]: the machine as far as training's numbers depend on it: the SIMD paths the
+//! kernels and the matrix products pick at run time (AVX2 + FMA, AVX-512), and the data caches'
+//! sizes, by which `gemm` blocks its products and so orders its sums. Two machines that differ
+//! in either train the same run to other numbers: a last-bit difference in one step grows over
+//! a thousand steps (on horse-gallop by mesh, seed 2: test RMS 0.0220 on one machine, 0.0249 on
+//! another, same code and settings). Records of runs keep it, so that a rerun knows whether it
+//! can expect the same bits.
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 
-/// The machine of a run: [`RunResult::platform`](super::run::RunResult::platform).
+/// The machine of a run, as far as its numbers depend on it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Platform {
     /// The CPU's model name (`/proc/cpuinfo`), for the reader.
