@@ -218,6 +218,34 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
     assert_eq!(bare_json["stop_reason"], "unrecorded");
     assert!(bare_json["epochs"].is_null() && bare_json["loss_plot"].is_null());
     assert_eq!(bare_json["test_rms"], v["test_rms"]);
+    // --resume on such a folder continues from its weights (not from a fresh start).
+    let out = meshvae(&[
+        "train",
+        s(&set),
+        "--out",
+        s(&bare),
+        "--resume",
+        "--epochs",
+        "1",
+        "--batch",
+        "4",
+        "--latent",
+        "16",
+        "--quiet",
+    ]);
+    ok(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("training continues from them"), "{stderr}");
+    let first_loss = |folder: &std::path::Path| -> f64 {
+        let log = std::fs::read_to_string(folder.join("log.jsonl")).unwrap();
+        let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
+        first["train_loss"].as_f64().unwrap()
+    };
+    let (continued, fresh) = (first_loss(&bare), first_loss(&model));
+    assert!(
+        continued < fresh,
+        "first epoch from the weights {continued}, fresh {fresh}"
+    );
     assert!(v["test_rms"].as_f64().unwrap() > 0.0);
 
     let rec = dir.join("rec");

@@ -131,6 +131,16 @@ impl<'a> Trainer<'a> {
         if options.resume && folder.checkpoint().is_file() {
             let (checkpoint, weights) = (folder.checkpoint(), folder.weights());
             progress = Checkpoint::load(&checkpoint, &weights, &mut model, &mut adam)?;
+        } else if options.resume && written_elsewhere(&folder) {
+            // Weights without a training record (meshvae.torch's `save`, or a folder assembled
+            // by hand): they are what the user wants continued; only the optimiser's moments
+            // and the schedule start afresh.
+            model.load(&folder.weights())?;
+            eprintln!(
+                "{}: no checkpoint or log, only weights: training continues from them \
+                 (weights.safetensors) with a fresh optimiser and schedule, from epoch 1",
+                folder.dir.display()
+            );
         } else if options.resume {
             // Interrupted before its first checkpoint: said, so that a restart is not mistaken
             // for a continuation.
@@ -438,4 +448,10 @@ impl<'a> Trainer<'a> {
         }
         Ok(())
     }
+}
+
+/// A model folder whose weights no `meshvae train` run recorded (no log, no status): written
+/// by another program, such as meshvae.torch's `save`.
+fn written_elsewhere(folder: &ModelFolder) -> bool {
+    folder.weights().is_file() && !folder.log().is_file() && !folder.status().is_file()
 }
