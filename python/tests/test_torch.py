@@ -325,7 +325,8 @@ def _one_step_each(horse_torch, horse_model, horse, double):
     split = json.loads((horse_model / "split.json").read_text())
     dtype = torch.float64 if double else torch.float32
     model = MeshVAE.from_folder(horse_model, dtype=dtype) if double else copy.deepcopy(horse_torch)
-    x = model.features(horse.positions[split["train"][:12]]).to(dtype)
+    x = model.features(horse.positions[split["train"][:12]])
+    assert x.dtype == dtype
     eps = torch.randn(len(x), model.latent, generator=torch.Generator().manual_seed(5))
     eps = eps.to(dtype)
     lr, betas = 1e-3, (0.9, 0.95)

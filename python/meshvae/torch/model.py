@@ -362,8 +362,9 @@ class MeshVAE(nn.Module):
     def features(self, positions: Any) -> Tensor:
         """The network's input for meshes with the model's connectivity (positions [N, V, 3]
         or [V, 3], numpy or torch): ACAP features relative to the folder's template, normalised
-        as its normalization.json says, exactly what ``meshvae`` feeds the encoder. float32
-        [N, V, 9] (or [V, 9]) on the model's device. Needs a model from :meth:`from_folder`."""
+        as its normalization.json says, exactly what ``meshvae`` feeds the encoder (computed in
+        float32). [N, V, 9] (or [V, 9]) on the model's device, of its dtype. Needs a model
+        from :meth:`from_folder`."""
         source = self.source
         if source is None:
             raise ValueError(
@@ -374,7 +375,7 @@ class MeshVAE(nn.Module):
         p = np.asarray(p)
         single = p.ndim == 2
         x = _meshvae._torch_model_inputs(source, p[None] if single else p)
-        out = torch.from_numpy(np.asarray(x)).to(self._device())
+        out = torch.from_numpy(np.asarray(x)).to(self._device(), self._dtype())
         return out[0] if single else out
 
     def positions(self, x_hat: Any) -> np.ndarray:
