@@ -17,6 +17,9 @@ Usage (any model folder made by `meshvae train`, e.g. `--epochs 1`):
 
     python3 benches/reference/pytorch_step.py MODEL_DIR [--steps 30] [--threads 2] [--batch 32]
 
+`--meshvae-torch` times `meshvae.torch.MeshVAE.from_folder(MODEL_DIR)` (the package's module of
+the same network, where `meshvae` and torch are installed) in place of the network below.
+
 Prints one JSON line: the median, 10th and 90th percentile step times in ms (the first three
 steps dropped) and the peak resident memory. The input is random in (-0.95, 0.95), as in the
 criterion bench `train`: a step's cost does not depend on the values.
@@ -181,6 +184,7 @@ def main():
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--meshvae-torch", action="store_true", help="time meshvae.torch.MeshVAE")
     args = ap.parse_args()
     try:
         hierarchy = read_hierarchy(args.model)
@@ -190,7 +194,21 @@ def main():
         sys.exit("--steps: at least 4 (the first three are dropped)")
     torch.set_num_threads(args.threads)
     torch.manual_seed(7)
-    model = MeshVae(hierarchy)
+    if args.meshvae_torch:
+        from meshvae.torch import MeshVAE
+
+        model = MeshVAE.from_folder(args.model).train()
+
+        def step_loss(x, eps):
+            return model.loss(x, eps).total  # [B, V, C] in; vertex-major inside
+
+    else:
+        model = MeshVae(hierarchy)
+
+        def step_loss(x, eps):
+            # The batch arrives mesh by mesh, [B, V, C]; the network runs vertex-major.
+            return loss(model, x.permute(1, 0, 2).contiguous(), eps)
+
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     v = hierarchy["levels"][0]["vertex_count"]
     x = torch.rand(args.batch, v, 9) * 1.9 - 0.95
@@ -199,8 +217,7 @@ def main():
         eps = torch.randn(args.batch, 128)
         t = time.perf_counter()
         opt.zero_grad(set_to_none=True)
-        # The batch arrives mesh by mesh, [B, V, C]; the network runs vertex-major.
-        loss(model, x.permute(1, 0, 2).contiguous(), eps).backward()
+        step_loss(x, eps).backward()
         opt.step()
         times.append((time.perf_counter() - t) * 1e3)
     kept = sorted(times[3:])
@@ -212,6 +229,7 @@ def main():
                 "batch": args.batch,
                 "threads": args.threads,
                 "torch": torch.__version__,
+                "network": "meshvae.torch" if args.meshvae_torch else "hand-written",
                 "steps": len(kept),
                 "median_ms": round(statistics.median(kept), 1),
                 "p10_ms": round(q[0], 1),

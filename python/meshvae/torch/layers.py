@@ -80,8 +80,13 @@ def _chebyshev(op: Tensor, weight: Tensor, k: int, h: Tensor) -> Tensor:
     for order in range(1, k):
         lx = torch.sparse.mm(op, terms[-1])
         terms.append(lx if order == 1 else 2.0 * lx - terms[-2])
-    stacked = torch.stack(terms, dim=-1).reshape(v * b, c_in * k)
-    return (stacked @ weight).reshape(v, b, weight.shape[1])
+    # Whole channel blocks side by side (column k·C_in + c) copy far faster than stacking k
+    # innermost, the weight's row order, so the weight is permuted instead; `linear` takes the
+    # weight's gradient as gᵀx, which runs several times faster on CPU than xᵀg.
+    c_out = weight.shape[1]
+    stacked = torch.cat([t.reshape(v * b, c_in) for t in terms], dim=1)
+    by_order = weight.reshape(c_in, k, c_out).transpose(0, 1).reshape(k * c_in, c_out)
+    return nn.functional.linear(stacked, by_order.t()).reshape(v, b, c_out)
 
 
 class ChebConv(nn.Module):
