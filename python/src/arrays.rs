@@ -39,30 +39,29 @@ fn values<T: Element + Copy>(a: &PyReadonlyArrayDyn<'_, T>) -> Vec<T> {
 
 /// A float32 or float64 array as f32 values in C order, with its shape.
 pub fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<f32>, Vec<usize>)> {
-    let a = ndarray(obj, name)?;
-    let shape = a.shape().to_vec();
-    if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f32>>() {
-        return Ok((values(&x), shape));
-    }
-    if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f64>>() {
-        return Ok((values(&x).into_iter().map(|v| v as f32).collect(), shape));
-    }
-    Err(input(format!(
-        "{name}: expected a float32 or float64 array, got dtype {}",
-        dtype_name(&a)
-    )))
+    float_values(obj, name, |v| v, |v| v as f32)
 }
 
 /// A float32 or float64 array as f64 values in C order (float32 widened exactly), with its
 /// shape.
 pub fn floats64(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<f64>, Vec<usize>)> {
+    float_values(obj, name, f64::from, |v| v)
+}
+
+/// A float32 or float64 array's values in C order, each converted by `from32` or `from64`.
+fn float_values<T>(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    from32: impl Fn(f32) -> T,
+    from64: impl Fn(f64) -> T,
+) -> PyResult<(Vec<T>, Vec<usize>)> {
     let a = ndarray(obj, name)?;
     let shape = a.shape().to_vec();
-    if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f64>>() {
-        return Ok((values(&x), shape));
-    }
     if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f32>>() {
-        return Ok((values(&x).into_iter().map(f64::from).collect(), shape));
+        return Ok((values(&x).into_iter().map(from32).collect(), shape));
+    }
+    if let Ok(x) = a.extract::<PyReadonlyArrayDyn<'_, f64>>() {
+        return Ok((values(&x).into_iter().map(from64).collect(), shape));
     }
     Err(input(format!(
         "{name}: expected a float32 or float64 array, got dtype {}",
