@@ -35,3 +35,21 @@ pub(crate) struct HostTensor {
     pub data: HostVec,
     pub dims: Vec<usize>,
 }
+
+/// The values of `t` borrowed in place when it is a contiguous f32/f64 CPU tensor; `None`
+/// otherwise (other devices, dtypes and layouts take candle's ops instead).
+pub(crate) fn with_cpu_values<R>(
+    t: &candle_core::Tensor,
+    f: impl FnOnce(HostSlice<'_>) -> R,
+) -> Option<R> {
+    let (storage, layout) = t.storage_and_layout();
+    let (candle_core::Storage::Cpu(cpu), Some((lo, hi))) = (&*storage, layout.contiguous_offsets())
+    else {
+        return None;
+    };
+    match cpu {
+        candle_core::CpuStorage::F32(v) => Some(f(HostSlice::F32(&v[lo..hi]))),
+        candle_core::CpuStorage::F64(v) => Some(f(HostSlice::F64(&v[lo..hi]))),
+        _ => None,
+    }
+}

@@ -10,6 +10,7 @@ mod clip;
 mod kernels;
 
 pub use clip::GradClip;
+use clip::square_sum_f64;
 pub(crate) use kernels::GradSource;
 
 use crate::error::{Result, VaeError};
@@ -231,8 +232,7 @@ impl Adam {
             let mut sq = 0.0;
             for slot in &self.slots {
                 if let Some(g) = grads.get(&slot.var) {
-                    let g = g.to_dtype(DType::F64)?;
-                    sq += g.sqr()?.sum_all()?.to_scalar::<f64>()?;
+                    sq += square_sum_f64(g)?;
                 }
             }
             grad_scale = self.clip.scale(sq.sqrt());
