@@ -5,7 +5,8 @@
 //! them from a mesh, though this crate does not depend on it) and batches of per-vertex features
 //! as candle tensors `[B, V, C]` (or `[V, C]`), f32 or f64.
 //! **Out:** differentiable layers: [`SparseOp`] (y = A x), [`ChebConv`]
-//! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`MeanPool`],
+//! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`SpiralConv`]
+//! (SpiralNet++'s: a dense layer over each vertex's spiral of vertices), [`MeanPool`],
 //! [`DePool`], [`Sampling`] and [`MaxPool`] (signed largest magnitude per cluster, or with
 //! [`MaxMode::PlainMax`] graph max pooling over overlapping neighbourhoods).
 //!
@@ -83,6 +84,8 @@ mod order;
 mod pool;
 mod simd;
 mod spatial;
+mod spiral;
+mod spiral_kernel;
 mod spmm;
 #[cfg(test)]
 mod test_util;
@@ -100,5 +103,6 @@ pub use order::{inverse_order, locality_order, permute_symmetric};
 pub use pool::{DePool, MaxPool, MeanPool, Sampling};
 pub use sparse_csr::CsrMatrix;
 pub use spatial::{SpatialConfig, SpatialConv, neighbour_mean_matrix};
+pub use spiral::SpiralConv;
 pub use spmm::{Backend, SparseOp};
 pub use workspace::Workspace;

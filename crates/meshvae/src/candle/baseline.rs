@@ -1,29 +1,23 @@
 //! The other auto-encoders ([`BaselinePlan`]) in candle: their layers built on the plan's
 //! variables, run with candle's autograd (the CPU engine covers ours only).
 //!
-//! Activations stay batch-major `[B, V, C]` between graph layers: a spiral convolution gathers
-//! each vertex's spiral `[B, V·S, C]`, which is already `[B·V, S·C]` (index s·C + c,
-//! SpiralNet++'s order) for its one dense layer, without a transpose.
+//! Activations stay batch-major `[B, V, C]` between graph layers, the layout of spectral-conv's
+//! layers: its Chebyshev convolution for CoMA, its spiral convolution (one dense layer over
+//! each vertex's spiral, index s·C + c in SpiralNet++'s order) for SpiralNet++.
 
 use crate::error::{Result, VaeError};
 use crate::net::baseline::{BaselinePlan, BaselineStep, Dense, GraphLayer};
 use crate::net::network::{Activation, GraphConvKind};
 use candle_core::{Device, Tensor, Var};
 use mesh_hierarchy::{Hierarchy, Pooler, spirals};
-use spectral_conv::{ChebConv, Sampling, SparseOp};
+use spectral_conv::{ChebConv, Sampling, SparseOp, SpiralConv};
 use std::sync::Arc;
 
 /// A graph convolution of a baseline.
 #[derive(Debug, Clone)]
 enum Conv {
     Cheb(ChebConv),
-    Spiral {
-        /// `[V·S]` u32: vertex v's spiral at v·S … v·S + S − 1.
-        indices: Tensor,
-        length: usize,
-        weight: Tensor,
-        bias: Option<Tensor>,
-    },
+    Spiral(SpiralConv),
 }
 
 #[derive(Debug, Clone)]
@@ -56,7 +50,7 @@ fn activate(x: Tensor, a: Activation) -> Result<Tensor> {
         Activation::Linear => x,
         Activation::Tanh => x.tanh()?,
         Activation::Relu => x.relu()?,
-        Activation::Elu => x.elu(1.0)?,
+        Activation::Elu => super::elu::elu(&x, 1.0)?,
     })
 }
 
@@ -84,20 +78,7 @@ impl Conv {
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
         match self {
             Self::Cheb(c) => Ok(c.forward(x)?),
-            Self::Spiral {
-                indices,
-                length,
-                weight,
-                bias,
-            } => {
-                let (b, v, c) = x.dims3()?;
-                let gathered = x.index_select(indices, 1)?.reshape((b * v, length * c))?;
-                let mut y = gathered.matmul(weight)?;
-                if let Some(bias) = bias {
-                    y = y.broadcast_add(bias)?;
-                }
-                Ok(y.reshape((b, v, weight.dim(1)?))?)
-            }
+            Self::Spiral(c) => Ok(c.forward(x)?),
         }
     }
 }
@@ -134,13 +115,12 @@ impl BaselineNet {
                 GraphConvKind::Spiral { length } => {
                     let level = &hierarchy.levels[g.level];
                     let s = spirals(&level.positions, &level.faces, length, 1)?;
-                    let n = s.indices.len();
-                    Conv::Spiral {
-                        indices: Tensor::from_vec(s.indices, n, device)?,
+                    Conv::Spiral(SpiralConv::from_weights(
+                        &s.indices,
                         length,
-                        weight: t(g.weight),
-                        bias: g.bias.map(t),
-                    }
+                        t(g.weight),
+                        g.bias.map(t),
+                    )?)
                 }
             };
             Ok(Layer::Conv {
@@ -265,12 +245,13 @@ mod tests {
         let mesh = qem_simplify::shapes::icosphere(1);
         let (v, b, c, o, s) = (mesh.vertex_count(), 2, 3, 4, 5);
         let sp = spirals(&mesh.positions, &mesh.faces, s, 1).unwrap();
-        let conv = Conv::Spiral {
-            indices: Tensor::from_vec(sp.indices.clone(), v * s, &Device::Cpu).unwrap(),
-            length: s,
-            weight: random(&[s * c, o], 2),
-            bias: Some(random(&[o], 3)),
-        };
+        let spiral = SpiralConv::from_weights(
+            &sp.indices,
+            s,
+            random(&[s * c, o], 2),
+            Some(random(&[o], 3)),
+        );
+        let conv = Conv::Spiral(spiral.unwrap());
         let x = random(&[b, v, c], 1);
         let y: Vec<f64> = conv
             .forward(&x)

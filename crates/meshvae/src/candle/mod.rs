@@ -7,4 +7,5 @@
 pub(crate) mod baseline;
 pub(crate) mod batch_norm;
 mod elementwise;
+mod elu;
 pub(crate) mod model;

@@ -137,7 +137,7 @@ mod tests {
     fn square_sum_read_in_place_has_candles_bits() {
         // Magnitudes over twelve orders, so that any other summation order shows in the bits.
         let values: Vec<f64> = (0..100_002)
-            .map(|i| ((i as f64 * 0.7548).sin() * 10f64.powi(i % 13 - 6)))
+            .map(|i| (i as f64 * 0.7548).sin() * 10f64.powi(i % 13 - 6))
             .collect();
         for dtype in [DType::F32, DType::F64] {
             let g = Tensor::new(values.as_slice(), &candle_core::Device::Cpu)
