@@ -20,7 +20,7 @@ pub struct TrainConfig {
     /// Meshes per step (the authors: 50); the last batch of an epoch may be smaller.
     pub batch: usize,
     /// Adam's initial (or, with a warm-up, peak) learning rate (1e-2; the authors' 1e-3 took
-    /// more than 8,000 steps to reach what 1e-2 reaches in 1,500, see docs/benchmarks.md
+    /// more than 8,000 steps to reach what 1e-2 reaches in 1,500, see docs/convergence.md
     /// "Convergence"; 3e-2 diverges).
     pub lr: f64,
     /// Seeds the split, the initial weights, the shuffles and the sampling noise.
@@ -86,7 +86,7 @@ fn is_zero(x: &f64) -> bool {
 /// collapsed edges hold stretch features 10–20× the rest, and a min–max range fitted to them
 /// squeezes 99 % of the entries into 7 % of the network's output range. Fitting between the
 /// 0.1 % and 99.9 % quantiles (and clamping the 0.2 % beyond) converged horse-gallop to a lower
-/// error in fewer steps (docs/benchmarks.md, "Convergence").
+/// error in fewer steps (docs/convergence.md).
 pub const DEFAULT_NORMALIZE_QUANTILE: f64 = 0.001;
 
 /// The step budget of a run given no budget: long enough for every set measured to converge
@@ -145,7 +145,7 @@ impl TrainConfig {
 /// within a run's warm-up and decay. With 0.95 (about 20 steps) none of horse-gallop's seeds
 /// 1–3 and neither synthetic run (the demo, the spike test) spiked at a peak rate of 1e-2,
 /// where 0.99 spiked on one seed of each schedule tried; alone it left one 3.1× spike in
-/// samba's three seeds, which [`DEFAULT_GRAD_CLIP`] removes (docs/benchmarks.md, "Training
+/// samba's three seeds, which [`DEFAULT_GRAD_CLIP`] removes (docs/convergence.md, "Training
 /// schedule").
 pub const DEFAULT_BETA2: f64 = 0.95;
 
@@ -153,7 +153,7 @@ pub const DEFAULT_BETA2: f64 = 0.95;
 /// the dense heads, which sum tens of thousands of inputs per latent unit, move their outputs
 /// hundreds of times further per step than a convolution does; the loss spikes began in them.
 /// A third of the rate kept their learning speed (a tenth slowed it) and, with β₂ 0.95,
-/// removed the spikes (docs/benchmarks.md, "Training schedule").
+/// removed the spikes (docs/convergence.md, "Training schedule").
 pub const DEFAULT_HEAD_LR_SCALE: f64 = 0.3;
 
 /// The default [`TrainConfig::grad_clip`]: a step's gradient is scaled down to 3× the running
@@ -161,7 +161,7 @@ pub const DEFAULT_HEAD_LR_SCALE: f64 = 0.3;
 /// those are the first steps of a spike: it removed the one 3.1× spike left in samba's seeds
 /// 1–3 at the same mean error (0.01023 against 0.01020), and horse-gallop's seeds 1–3 ended at
 /// 0.0198 against 0.0184 without it, within their seed-to-seed spread. A tighter bound costs
-/// error: `--clip 2` clipped 20 steps a run and averaged 0.0202 (docs/benchmarks.md,
+/// error: `--clip 2` clipped 20 steps a run and averaged 0.0202 (docs/convergence.md,
 /// "Training schedule").
 pub const DEFAULT_GRAD_CLIP: f64 = 3.0;
 

@@ -81,7 +81,7 @@ impl Schedule {
         }
     }
 
-    /// The default, measured in docs/benchmarks.md ("Training schedule"): a 300-step warm-up
+    /// The default, measured in docs/convergence.md ("Training schedule"): a 300-step warm-up
     /// (shorter ones met loss spikes at the peak rate sooner), a half cosine to 1/32 of the
     /// rate over 1,200 steps, then a stop once 200 steps pass without a best 1 % below the
     /// last; the validation loss is looked at every 10 steps. horse-gallop and samba converge
