@@ -317,9 +317,26 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         std::fs::read_to_string(seed_dir.join("ours/log.jsonl")).unwrap(),
         log
     );
-    // Every record names the code that made it, as the page does.
+    // Every record names the code that made it, as the page does; the same code trained and
+    // evaluated it, so the record names no other.
     let commit = xtask::reproduce::commit::Commit::of(Path::new(env!("CARGO_MANIFEST_DIR")));
     assert_eq!(ours.commit, commit);
+    assert_eq!((&ours.trained_by, &again.trained_by), (&None, &None));
+    if commit.is_some() {
+        // A finished folder whose training left no list of commits (trained before they were
+        // kept, or the list lost) is evaluated again, and its record says so.
+        std::fs::remove_file(seed_dir.join("ours.result.json")).unwrap();
+        std::fs::remove_file(seed_dir.join("ours.commits.json")).unwrap();
+        reproduce_with(&work, &dir.join("unknown.md"), &converged);
+        let unknown = result_in(&work, "synthetic", "converged-s4", "ours");
+        assert_eq!(unknown.trained_by, Some(vec![]));
+        assert_eq!(unknown.test_rms, ours.test_rms);
+        let md = std::fs::read_to_string(dir.join("unknown.md")).unwrap();
+        assert!(
+            md.contains("of which 1 was trained in part by other code"),
+            "{md}"
+        );
+    }
     if let Some(commit) = &commit {
         assert!(
             md.contains(&format!("- Code: `{commit}` ({runs} runs).")),

@@ -140,6 +140,17 @@ pub fn check(
             }
         }
     }
+    if let Some(by) = &stored.trained_by {
+        let names: Vec<String> = by.iter().map(|c| c.to_string()).collect();
+        reasons.push(format!(
+            "The record's run was trained by {} (resumed or evaluated again by other code): \
+             one commit's training need not give its numbers.",
+            match names.is_empty() {
+                true => "code not recorded".to_string(),
+                false => names.join(", then "),
+            }
+        ));
+    }
     let here = Platform::this();
     match &stored.platform {
         None => reasons.push(format!(

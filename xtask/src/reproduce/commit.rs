@@ -58,6 +58,67 @@ impl Commit {
     }
 }
 
+/// The commits that trained a model folder, kept beside it (`<folder>.commits.json`, where
+/// `meshvae train --force` does not remove it): a run resumed by other code, or a finished
+/// folder evaluated again by other code, would otherwise be recorded as this code's alone.
+pub struct TrainedBy {
+    path: std::path::PathBuf,
+}
+
+impl TrainedBy {
+    pub fn of(model_dir: &Path) -> Self {
+        let mut name = model_dir.as_os_str().to_owned();
+        name.push(".commits.json");
+        Self { path: name.into() }
+    }
+
+    /// The commits so far, in order; `None` where the folder's training was not recorded (no
+    /// file, or an unreadable one).
+    pub fn read(&self) -> Option<Vec<Commit>> {
+        let text = std::fs::read_to_string(&self.path).ok()?;
+        serde_json::from_str(&text).ok()
+    }
+
+    /// Notes that `commit` trains the folder now: a fresh start begins the list, a resumed run
+    /// adds it unless it is the last one already. Code outside git is not noted.
+    pub fn note(&self, commit: Option<&Commit>, fresh: bool) -> std::io::Result<()> {
+        let Some(commit) = commit else {
+            return Ok(());
+        };
+        let mut list = match (fresh, self.read()) {
+            (true, _) => Vec::new(),
+            (false, Some(list)) => list,
+            // Resuming a folder trained before its commits were kept.
+            (false, None) => vec![Commit {
+                describe: "unrecorded".into(),
+                dirty: false,
+            }],
+        };
+        if list.last() != Some(commit) {
+            list.push(commit.clone());
+        }
+        if let Some(parent) = self.path.parent() {
+            std::fs::create_dir_all(parent)?;
+        }
+        let text = serde_json::to_string_pretty(&list).map_err(std::io::Error::other)?;
+        mesh_io::atomic::write_bytes_atomic(&self.path, text.as_bytes())
+            .map_err(std::io::Error::other)
+    }
+
+    /// What a record of the folder, written by `commit`, says besides its own commit: `None`
+    /// when `commit` alone trained it; otherwise every commit that did (`unrecorded` for
+    /// training before the commits were kept; an empty list when none is known).
+    pub fn for_record(&self, commit: Option<&Commit>) -> Option<Vec<Commit>> {
+        // Outside git nothing is known, and the record's missing commit says so already.
+        commit?;
+        match self.read() {
+            Some(list) if list.iter().all(|c| Some(c) == commit) && !list.is_empty() => None,
+            Some(list) => Some(list),
+            None => Some(Vec::new()),
+        }
+    }
+}
+
 impl fmt::Display for Commit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if self.dirty {
@@ -71,6 +132,45 @@ impl fmt::Display for Commit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn trained_by_lists_every_commit_that_trained_a_folder() {
+        let dir = std::env::temp_dir().join(format!("trained-by-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let by = TrainedBy::of(&dir.join("ours"));
+        let (a, b) = (
+            Commit {
+                describe: "aaaaaaa".into(),
+                dirty: false,
+            },
+            Commit {
+                describe: "bbbbbbb".into(),
+                dirty: true,
+            },
+        );
+        // Nothing kept: a finished folder evaluated again names no known training.
+        assert_eq!(by.for_record(Some(&a)), Some(vec![]));
+        assert_eq!(by.for_record(None), None);
+        // One commit trained it, resumed by the same: nothing besides the record's own.
+        by.note(Some(&a), true).unwrap();
+        by.note(Some(&a), false).unwrap();
+        assert_eq!(by.read(), Some(vec![a.clone()]));
+        assert_eq!(by.for_record(Some(&a)), None);
+        // Resumed by other code, or evaluated by it: every commit, in order.
+        by.note(Some(&b), false).unwrap();
+        assert_eq!(by.for_record(Some(&b)), Some(vec![a.clone(), b.clone()]));
+        assert_eq!(by.for_record(Some(&a)), Some(vec![a.clone(), b.clone()]));
+        // A fresh start forgets the earlier training.
+        by.note(Some(&b), true).unwrap();
+        assert_eq!(by.for_record(Some(&b)), None);
+        // A folder trained before the commits were kept, resumed now.
+        std::fs::remove_file(dir.join("ours.commits.json")).unwrap();
+        by.note(Some(&a), false).unwrap();
+        let unrecorded = by.for_record(Some(&a)).unwrap();
+        assert_eq!(unrecorded.len(), 2);
+        assert_eq!(unrecorded[0].describe, "unrecorded");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn the_hash_is_read_with_or_without_a_tag() {

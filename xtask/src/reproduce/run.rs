@@ -3,7 +3,7 @@
 //! not repeated; one made with other settings is trained again.
 
 use super::ReproError;
-use super::commit::Commit;
+use super::commit::{Commit, TrainedBy};
 use super::plan::{Budget, Run};
 pub use super::settings::{RunSettings, setting_differences};
 use candle_core::Device;
@@ -102,6 +102,11 @@ pub struct RunResult {
     /// whether the numbers still agree). Absent from records written before they kept it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub commit: Option<Commit>,
+    /// Every commit that trained the run, when that is not `commit` alone: a run resumed by
+    /// other code, or a finished model folder evaluated again (`unrecorded`: training before
+    /// this was kept; empty: none known). Absent when `commit` trained it all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trained_by: Option<Vec<Commit>>,
     /// The machine that trained it, as far as the numbers depend on it (`--check` can match
     /// them digit for digit only on the same). Absent from records written before they kept it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -298,7 +303,11 @@ pub fn execute(
     let mut session_train = 0.0;
     // A run whose training finished but whose result was lost (or deleted) is only evaluated
     // again: its checkpoint was dropped when the result was first written.
+    let trained_by = TrainedBy::of(&out);
     if !(resume && training_finished(&folder, run.budget)?) {
+        trained_by
+            .note(place.commit, !resume)
+            .map_err(|e| ReproError::io(&out, e))?;
         meshvae::train(&request, &options, |record| {
             session_train += record.seconds;
             on_epoch(record);
@@ -382,6 +391,7 @@ pub fn execute(
             hierarchy: trained.spec.hierarchy,
         }),
         commit: place.commit.cloned(),
+        trained_by: trained_by.for_record(place.commit),
         platform: Some(Platform::this()),
     };
     let path = run.result_path(place.records);

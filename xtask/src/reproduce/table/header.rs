@@ -218,6 +218,14 @@ fn code(md: &mut String, o: &Outcome) {
             if unnamed == 1 { "record" } else { "records" }
         ));
     }
+    let mixed = o.results.iter().filter(|r| r.trained_by.is_some()).count();
+    if mixed > 0 {
+        parts.push(format!(
+            "of which {mixed} {} trained in part by other code (the record's `trained_by` \
+             names it)",
+            if mixed == 1 { "was" } else { "were" }
+        ));
+    }
     let _ = writeln!(
         md,
         "- Code: {}. `cargo xtask reproduce --check <record>` trains one run again with its \

@@ -38,6 +38,7 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
         copy_split: None,
         settings: None,
         commit: None,
+        trained_by: None,
         platform: None,
     }
 }
