@@ -167,7 +167,7 @@ fn default_results(budget: Budget, by_shape: bool, protocol: &plan::Protocol) ->
 }
 
 fn run_reproduce(args: ReproduceArgs) -> Result<(), reproduce::ReproError> {
-    let commit = reproduce::commit::Commit::of(workspace());
+    let commit = reproduce::commit::Commit::compiled();
     if let Some(record) = &args.check {
         return run_check(record, &args, commit.as_ref());
     }

@@ -1,5 +1,6 @@
-//! Which code made a record: the workspace's commit, as `git describe` names it, and whether
-//! tracked files had uncommitted changes.
+//! Which code made a record: the commit the xtask binary was built from, as `git describe` names
+//! it, and whether tracked files had uncommitted changes; and the commits that trained a model
+//! folder ([`TrainedBy`]).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -46,6 +47,16 @@ impl Commit {
         Some(Self {
             describe,
             dirty: !status.is_empty(),
+        })
+    }
+
+    /// The commit this binary was compiled from (its build script asked git), or `None` for
+    /// a build outside a git work tree. What a record names: the tree the binary runs beside
+    /// may have moved on since the build.
+    pub fn compiled() -> Option<Self> {
+        Some(Self {
+            describe: option_env!("XTASK_COMMIT")?.to_string(),
+            dirty: option_env!("XTASK_COMMIT_DIRTY") == Some("true"),
         })
     }
 
@@ -186,6 +197,13 @@ mod tests {
             ..commit("e5c08e2a1b2c")
         };
         assert_eq!(dirty.to_string(), "e5c08e2a1b2c with uncommitted changes");
+    }
+
+    #[test]
+    fn the_binary_names_the_commit_it_was_built_from() {
+        // Built just now from this tree: the stamp is the tree's commit.
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+        assert_eq!(Commit::compiled(), Commit::of(root));
     }
 
     #[test]
