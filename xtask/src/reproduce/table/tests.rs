@@ -457,3 +457,47 @@ fn the_claims_are_counted_seed_by_seed_and_ours_is_ranked() {
         "{section}"
     );
 }
+
+#[test]
+fn the_framework_claims_name_the_seeds_on_which_ours_is_lower() {
+    // Rigid distances: ours below Tan on seed 1 only, below CoMA on both, above SpiralNet++ on
+    // both; Gao (spatial) has no seed.
+    let mut results = Vec::new();
+    for (seed, ours, tan, coma, spiral) in [(1, 0.5, 0.6, 0.9, 0.4), (2, 0.5, 0.45, 0.8, 0.3)] {
+        for (column, rigid) in [
+            (OURS, ours),
+            ("tan2018", tan),
+            ("coma", coma),
+            ("spiralnet", spiral),
+        ] {
+            let mut r = result(column, seed, 1.0);
+            r.test_mean_distance_rigid = Some(rigid);
+            results.push(r);
+        }
+    }
+    let md = markdown(&outcome(results), None);
+    let section = &md[md
+        .find("The paper's `table:ERMS` puts ours below")
+        .unwrap_or_else(|| panic!("{md}"))..];
+    let row = |label: &str| {
+        (section.lines())
+            .find(|l| l.starts_with(&format!("| {label}")))
+            .unwrap_or_else(|| panic!("{section}"))
+            .to_string()
+    };
+    assert!(
+        row("Tan et al. 2018")
+            .ends_with("| not settled: ours lower on seed 1, not lower on seed 2 |"),
+        "{section}"
+    );
+    assert!(
+        row("Ranjan et al. 2018").ends_with("| **holds**: ours lower on seeds 1, 2 |"),
+        "{section}"
+    );
+    assert!(
+        row("Gong et al. 2019 (SpiralNet++), not in the paper")
+            .ends_with("| **does not hold**: ours not lower on seeds 1, 2 |"),
+        "{section}"
+    );
+    assert!(row("Gao et al. 2018").ends_with("| — |"), "{section}");
+}
