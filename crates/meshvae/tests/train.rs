@@ -399,9 +399,25 @@ fn model_folder_is_complete_refuses_overwrite_and_evaluates() {
         assert!(path.is_file(), "missing {}", path.display());
     }
 
+    // The training's lock is gone once it ended.
+    assert!(!out.join("training.lock").exists());
+
     let err = train(&request(&set, &out, 2), &options(false, false), |_| {}).unwrap_err();
     assert!(matches!(err, VaeError::Model { .. }), "{err}");
     assert!(err.to_string().contains("already holds a model"), "{err}");
+    // A folder another training holds (here: a live process, this one) is refused, resumed or
+    // replaced alike, and left as it was.
+    std::fs::write(out.join("training.lock"), std::process::id().to_string()).unwrap();
+    let log = std::fs::read_to_string(folder.log()).unwrap();
+    for (resume, force) in [(true, false), (false, true)] {
+        let err = train(&request(&set, &out, 3), &options(resume, force), |_| {}).unwrap_err();
+        assert!(
+            err.to_string().contains("is being trained by process"),
+            "{err}"
+        );
+    }
+    assert_eq!(std::fs::read_to_string(folder.log()).unwrap(), log);
+    std::fs::remove_file(out.join("training.lock")).unwrap();
     train(&request(&set, &out, 1), &options(false, true), |_| {}).unwrap();
 
     let trained = TrainedModel::load(&out, &Device::Cpu).unwrap();

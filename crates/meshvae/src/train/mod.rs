@@ -37,6 +37,7 @@ pub(crate) mod config;
 pub(crate) mod data;
 mod epoch_log;
 pub(crate) mod folder;
+mod lock;
 pub(crate) mod loss;
 mod loss_pass;
 mod phases;

@@ -336,10 +336,11 @@ fn prepare_out_dir(folder: &ModelFolder, force: bool) -> Result<()> {
         if !dir.is_dir() {
             return Err(VaeError::model(dir, "exists and is not a folder"));
         }
+        // The training's own lock (taken before this) does not make the folder another's.
         let non_empty = std::fs::read_dir(dir)
             .map_err(|e| VaeError::io(dir, e))?
-            .next()
-            .is_some();
+            .flatten()
+            .any(|entry| entry.file_name() != super::lock::LOCK_FILE);
         if non_empty && !force {
             let what = if folder.has_model() {
                 "already holds a model; pass --resume to continue it or --force to replace it"

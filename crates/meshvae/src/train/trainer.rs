@@ -9,6 +9,7 @@ use super::best::BestState;
 use super::checkpoint::{Checkpoint, Progress};
 use super::epoch_log::{EpochRecord, read_log, truncate_log};
 use super::folder::{ModelFolder, ModelSpec};
+use super::lock::TrainLock;
 use super::loss_pass::validation_loss;
 use super::phases::PhaseSeconds;
 use super::request::{TrainOptions, TrainRequest, TrainSummary, hierarchy_config};
@@ -71,6 +72,8 @@ pub(super) struct Trainer<'a> {
     /// best weights themselves cannot train.
     trained_since_rollback: bool,
     last_looked_at: u64,
+    /// Held while the trainer lives: no other training writes the folder meanwhile.
+    _lock: TrainLock,
 }
 
 impl<'a> Trainer<'a> {
@@ -83,6 +86,8 @@ impl<'a> Trainer<'a> {
         let hierarchy_config = hierarchy_config(&request.model, request.hierarchy);
         // Checked before anything is written, so bad settings leave no half-made model folder.
         request.model.validate()?;
+        // One training per folder, from before anything in it is read or changed.
+        let lock = TrainLock::acquire(&folder)?;
         // Left by a run killed while writing a file (its complete predecessor is still there).
         if options.resume || options.force {
             folder.remove_stale_temporaries()?;
@@ -166,6 +171,7 @@ impl<'a> Trainer<'a> {
             base_lr: spec.train.lr,
             prior_seconds: progress.seconds,
             last_looked_at: adam.step_count(),
+            _lock: lock,
             folder,
             spec,
             hierarchy,
