@@ -12,7 +12,9 @@
 //! (`spectral_conv::ChebKernel`, `SparseKernel`), as meshvae's training engine does: no tensor
 //! allocation, no autograd.
 //! Pooling and de-pooling use mesh-hierarchy's operators for our pooler (modified QEM to half the
-//! vertices, mean pooling, de-pooling by copy). On elephant-gallop the ablation's other two
+//! vertices, mean pooling, de-pooling by copy). SpiralNet++'s convolution (spirals of 9, 32 → 32
+//! channels, B = 32, horse-gallop) runs as spectral-conv's `SpiralConv` op against the gathered
+//! matrix of candle ops (its fallback). On elephant-gallop the ablation's other two
 //! poolings sit beside them: graph max pooling (the same coarse vertices, the plain max over
 //! each survivor's one-ring ∪ cluster; de-pooling by the mean over the neighbourhoods holding a
 //! vertex) and remeshing (`qem_simplify::remesh` to half the vertices, mean pooling).
@@ -26,12 +28,12 @@ use candle_core::{Device, Tensor, Var};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use mesh_hierarchy::{
     CsrMatrix, DepoolMode, Hierarchy, HierarchyConfig, LambdaMax, Pooler, PoolingOp, adjacency,
-    normalized_laplacian, rescaled_laplacian,
+    normalized_laplacian, rescaled_laplacian, spirals,
 };
 use qem_simplify::{RemeshConfig, SimplifyConfig, remesh, simplify};
 use spectral_conv::{
     Backend, ChebConv, ChebKernel, ConvDims, DePool, MaxMode, MaxPool, MeanPool, SparseKernel,
-    SparseOp, Workspace, locality_order, permute_symmetric,
+    SparseOp, SpiralConv, Workspace, locality_order, permute_symmetric,
 };
 use std::hint::black_box;
 use std::time::Duration;
@@ -438,5 +440,44 @@ fn buffer_level_ablation(group: &mut Group<'_>, ablation: &Ablation, xv: &[f32])
     });
 }
 
-criterion_group!(benches, bandwidth, conv);
+/// SpiralNet++'s costliest layer: spirals of 9 on horse-gallop's template, 32 → 32 channels.
+fn spiral(c: &mut Criterion) {
+    let Some(dir) = mesh_io::datasets::find_or_skip("horse-gallop") else {
+        return;
+    };
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("data set folder")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
+        .collect();
+    files.sort();
+    let template = mesh_io::read_mesh(&files[0]).expect("template loads").value;
+    let (length, channels) = (9, 32);
+    let s = spirals(&template.positions, &template.faces, length, 1).expect("spirals");
+    let v = template.vertex_count();
+    let weight = random((1, length * channels, channels), 4)
+        .squeeze(0)
+        .expect("2-D");
+    let w = Var::from_tensor(&(weight * 0.05).expect("scaled")).expect("var");
+    let x = Var::from_tensor(&random((BATCH, v, channels), 5)).expect("var");
+    let mut group = c.benchmark_group(format!("spiral conv horse-gallop ({v} vertices)"));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(4));
+    for (label, backend) in [("kernel", Backend::Kernel), ("fallback", Backend::Fallback)] {
+        let conv = SpiralConv::from_weights(&s.indices, length, w.as_tensor().clone(), None)
+            .expect("layer")
+            .with_backend(backend);
+        let forward = move |t: &Tensor| conv.forward(t).expect("forward");
+        group.bench_function(format!("S=9, 32->32 fwd, {label}"), |b| {
+            b.iter(|| black_box(forward(x.as_tensor())))
+        });
+        group.bench_function(format!("S=9, 32->32 fwd+bwd, {label}"), |b| {
+            b.iter(|| fwd_bwd(&forward, &x, None))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bandwidth, conv, spiral);
 criterion_main!(benches);
