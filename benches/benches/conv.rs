@@ -70,18 +70,23 @@ impl Ablation {
     }
 }
 
-/// The set's template graph, and (`reorder`) the same graph renumbered in
-/// `spectral_conv::locality_order` (reverse Cuthill–McKee), as a pipeline would do once.
-fn load(name: &str, reorder: bool) -> Option<Graph> {
+/// The set's first mesh by file name (one is enough for the connectivity), or `None` (said)
+/// where the set is absent.
+fn template(name: &str) -> Option<mesh_io::TriMesh> {
     let dir = mesh_io::datasets::find_or_skip(name)?;
-    // One mesh is enough for the connectivity: the first OBJ file by name.
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .expect("data set folder")
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "obj"))
         .collect();
     files.sort();
-    let template = mesh_io::read_mesh(&files[0]).expect("template loads").value;
+    Some(mesh_io::read_mesh(&files[0]).expect("template loads").value)
+}
+
+/// The set's template graph, and (`reorder`) the same graph renumbered in
+/// `spectral_conv::locality_order` (reverse Cuthill–McKee), as a pipeline would do once.
+fn load(name: &str, reorder: bool) -> Option<Graph> {
+    let template = template(name)?;
     let mut adj = adjacency(template.vertex_count(), &template.faces);
     if reorder {
         let order = locality_order(&adj).expect("square");
@@ -442,16 +447,9 @@ fn buffer_level_ablation(group: &mut Group<'_>, ablation: &Ablation, xv: &[f32])
 
 /// SpiralNet++'s costliest layer: spirals of 9 on horse-gallop's template, 32 → 32 channels.
 fn spiral(c: &mut Criterion) {
-    let Some(dir) = mesh_io::datasets::find_or_skip("horse-gallop") else {
+    let Some(template) = template("horse-gallop") else {
         return;
     };
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .expect("data set folder")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
-        .collect();
-    files.sort();
-    let template = mesh_io::read_mesh(&files[0]).expect("template loads").value;
     let (length, channels) = (9, 32);
     let s = spirals(&template.positions, &template.faces, length, 1).expect("spirals");
     let v = template.vertex_count();
