@@ -2,7 +2,8 @@
 //!
 //! **In:** fixed sparse operators as [`CsrMatrix`] (of the `sparse-csr` crate, re-exported here:
 //! a rescaled Laplacian L̃, pooling, de-pooling or sampling matrices, as `mesh-hierarchy` builds
-//! them from a mesh, though this crate does not depend on it) and batches of per-vertex features
+//! them from a mesh, though this crate does not depend on it), spiral index lists (`u32`, S per
+//! vertex, as `mesh_hierarchy::spirals` makes them) and batches of per-vertex features
 //! as candle tensors `[B, V, C]` (or `[V, C]`), f32 or f64.
 //! **Out:** differentiable layers: [`SparseOp`] (y = A x), [`ChebConv`]
 //! (y = Σ_k T_k(L̃) x W_k + b), [`SpatialConv`] (self + neighbour mean), [`SpiralConv`]
