@@ -18,7 +18,13 @@ fn git(root: &Path, args: &[&str]) -> Option<String> {
 }
 
 fn main() {
-    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // Read when the script runs, not baked in when it is compiled: a build-script binary is
+    // reused by every checkout that shares the target folder, and would stamp the commit of
+    // whichever checkout compiled it.
+    let manifest = std::env::var_os("CARGO_MANIFEST_DIR").map(std::path::PathBuf::from);
+    let Some(manifest) = manifest.as_deref() else {
+        return;
+    };
     let root = manifest.parent().unwrap_or(manifest);
     // Again whenever the code or the commit changes: every top-level entry but the pages and
     // the build output (directories are scanned whole), and git's HEAD, index and refs.

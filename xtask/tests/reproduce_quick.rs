@@ -344,6 +344,30 @@ fn quick_reproduce_writes_every_table_and_resumes() {
         );
     }
 
+    // The synthetic set holds no shape twice, so its split by mesh is its split by shape: the
+    // paper's split reuses every run above instead of training it again, and says so.
+    let by_mesh = reproduce_with(
+        &work,
+        &dir.join("by-mesh.md"),
+        &["--dataset", "synthetic", "--split-by-mesh"],
+    );
+    let stdout = String::from_utf8_lossy(&by_mesh.stdout);
+    assert!(
+        stdout.contains(&format!("{runs} runs ({runs} reused)")),
+        "{stdout}"
+    );
+    assert!(
+        !work
+            .join("synthetic/validation/converged-s4-by-mesh")
+            .exists()
+    );
+    let md = std::fs::read_to_string(dir.join("by-mesh.md")).unwrap();
+    assert!(
+        md.contains("synthetic holds no shape twice, so this split is its split by shape"),
+        "{md}"
+    );
+    assert!(!md.contains("| not run |"), "{md}");
+
     // A record made with another setting (here the rate, as when a default changes) is
     // flagged by --report-only and trained again, from scratch, by the next invocation.
     let record_path = seed_dir.join("ours.result.json");

@@ -19,6 +19,8 @@
 //! run leaves `<column>.result.json` beside it (with the commit and settings that made it) and
 //! is skipped next time while today's code would train it with the same settings, an unfinished
 //! one is resumed from its checkpoint, so an interrupted `reproduce` continues where it stopped.
+//! A set that holds no shape twice splits alike by shape and by mesh, so the paper's split
+//! trains it in the by-shape folders and both pages share those runs ([`Run::with_split_of`]).
 
 pub mod check;
 pub mod commit;
@@ -164,6 +166,9 @@ pub struct LoadedSet {
     pub diagonal: f64,
     /// How it was made, for the markdown.
     pub description: String,
+    /// Whether some shape occurs twice (`MeshSet::shape_groups`): only then does a split by
+    /// mesh differ from a split by shape.
+    pub repeated_shapes: bool,
 }
 
 /// The synthetic set of a quick run (258 vertices, 16 meshes) or of a full one (`meshvae
@@ -222,9 +227,14 @@ pub fn load(dataset: &'static Dataset, quick: bool) -> Result<LoadedSet, ReproEr
         }
     };
     let diagonal = mesh_io::bbox_diagonal(set.frame(0));
+    let repeated_shapes = set
+        .shape_groups(mesh_io::ShapeGroups::DEFAULT_TOLERANCE)
+        .map_err(|e| fail(e.to_string()))?
+        .has_repeats();
     Ok(LoadedSet {
         dataset,
         description: how,
+        repeated_shapes,
         set,
         source,
         diagonal,
@@ -304,7 +314,12 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
         let mut pending = Vec::new();
         let vertices = loaded.set.vertex_count();
         let mut too_small = Vec::new();
-        for run in runs.iter().filter(|r| r.dataset.name == dataset.name) {
+        let set_runs: Vec<Run> = runs
+            .iter()
+            .filter(|r| r.dataset.name == dataset.name)
+            .map(|r| r.with_split_of(loaded.repeated_shapes))
+            .collect();
+        for run in &set_runs {
             let net = run.column.net;
             if vertices < net.min_vertices() {
                 if !too_small.contains(&net) {

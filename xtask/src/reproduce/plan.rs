@@ -421,6 +421,17 @@ impl Run {
         train
     }
 
+    /// This run on a set with or without repeated shapes. Without repeats a split by mesh is
+    /// the split by shape, mesh for mesh (`meshvae::Split::random_by_shape`), and nothing else
+    /// in training depends on how it was drawn: the run is then the by-shape one, so that both
+    /// results pages share its folder and record instead of training it twice.
+    pub fn with_split_of(self, repeated_shapes: bool) -> Self {
+        Self {
+            by_shape: self.by_shape || !repeated_shapes,
+            ..self
+        }
+    }
+
     /// A short name for progress lines.
     pub fn name(&self) -> String {
         format!(
@@ -460,6 +471,27 @@ pub fn runs(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_split_by_mesh_of_a_set_without_repeats_is_its_split_by_shape() {
+        let run = |by_shape| Run {
+            dataset: dataset("samba").unwrap(),
+            protocol: &PROTOCOLS[0],
+            budget: Budget::CONVERGED,
+            seed: 2,
+            column: COLUMNS.iter().find(|c| c.is_ours()).unwrap(),
+            by_shape,
+        };
+        let work = Path::new("/w");
+        let shared = run(false).with_split_of(false);
+        assert!(shared.by_shape && shared.train_config().split_by_shape);
+        assert_eq!(shared.model_dir(work), run(true).model_dir(work));
+        // With repeats the two splits differ, and so do the runs.
+        let apart = run(false).with_split_of(true);
+        assert!(!apart.by_shape);
+        assert_ne!(apart.model_dir(work), run(true).model_dir(work));
+        assert!(run(true).with_split_of(true).by_shape);
+    }
 
     #[test]
     fn columns_are_unique_and_build_valid_models() {

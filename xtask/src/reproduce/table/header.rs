@@ -34,15 +34,36 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
             set.description
         );
     }
+    // A set without repeated shapes splits alike either way, and its runs are shared
+    // (`Run::with_split_of`).
+    let unrepeated: Vec<&str> = o
+        .sets
+        .iter()
+        .filter(|s| !s.repeated_shapes)
+        .map(|s| s.dataset.name)
+        .collect();
     let split = if opts.by_shape {
         "by shape: meshes with the same vertex positions (horse-gallop stores its 24-frame \
          cycle twice) are one shape and always land on the same side, so every test shape is \
          unseen; ⌊G/2⌋ of the G shapes train, always including mesh 0's, the rest pose every \
-         mesh's features are computed against; a set without repeats splits as mesh by mesh"
+         mesh's features are computed against; a set without repeats splits as mesh by mesh, \
+         so its runs are also those of the split by mesh"
+            .to_string()
     } else {
-        "mesh by mesh, as the paper's random halves (⌊N/2⌋ training meshes, always including \
-         mesh 0, the rest pose every mesh's features are computed against): where a set holds \
-         a shape twice, a test mesh may have its copy in training"
+        let mut split = "mesh by mesh, as the paper's random halves (⌊N/2⌋ training meshes, \
+                         always including mesh 0, the rest pose every mesh's features are \
+                         computed against): where a set holds a shape twice, a test mesh may \
+                         have its copy in training"
+            .to_string();
+        if !unrepeated.is_empty() {
+            let _ = write!(
+                split,
+                "; {} holds no shape twice, so this split is its split by shape, and its runs \
+                 are those of the split by shape (its records are in that split's folder)",
+                unrepeated.join(" and ")
+            );
+        }
+        split
     };
     let _ = writeln!(
         md,
@@ -106,14 +127,27 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     }
     code(md, o);
     if let Some(records) = &opts.records {
-        let _ = writeln!(
-            md,
-            "- Every run's numbers: `{}/<data set>/{}/{}{}/seed<N>/<column>.result.json`.",
-            records.display(),
-            opts.protocol.id,
-            opts.budget.dir_name(),
-            if opts.by_shape { "" } else { "-by-mesh" }
-        );
+        let folder = |suffix: &str| {
+            format!(
+                "`{}/<data set>/{}/{}{suffix}/seed<N>/<column>.result.json`",
+                records.display(),
+                opts.protocol.id,
+                opts.budget.dir_name(),
+            )
+        };
+        if opts.by_shape {
+            let _ = writeln!(md, "- Every run's numbers: {}.", folder(""));
+        } else if unrepeated.is_empty() {
+            let _ = writeln!(md, "- Every run's numbers: {}.", folder("-by-mesh"));
+        } else {
+            let _ = writeln!(
+                md,
+                "- Every run's numbers: {} ({}: {}).",
+                folder("-by-mesh"),
+                unrepeated.join(" and "),
+                folder("")
+            );
+        }
     }
     for note in &o.notes {
         let _ = writeln!(md, "- {note}");

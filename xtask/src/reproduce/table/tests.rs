@@ -72,6 +72,7 @@ fn outcome(results: Vec<RunResult>) -> Outcome {
             source: None,
             diagonal: 5.0,
             description: "test".into(),
+            repeated_shapes: true,
         }],
         results,
         reused: 0,
@@ -243,6 +244,7 @@ fn the_header_says_a_report_only_page_trained_nothing_and_gives_each_sets_time()
         source: None,
         diagonal: 5.0,
         description: "test".into(),
+        repeated_shapes: false,
     };
     o.sets.push(set);
     let mut r = result("ours", 1, 0.5);
@@ -500,4 +502,39 @@ fn the_framework_claims_name_the_seeds_on_which_ours_is_lower() {
         "{section}"
     );
     assert!(row("Gao et al. 2018").ends_with("| — |"), "{section}");
+}
+
+#[test]
+fn a_page_split_by_mesh_names_the_sets_whose_runs_it_shares_with_the_split_by_shape() {
+    let mut o = outcome(vec![result("ours", 1, 0.5)]);
+    o.options.by_shape = false;
+    o.options.records = Some("docs/runs".into());
+    let md = markdown(&o, None);
+    assert!(!md.contains("holds no shape twice"), "{md}");
+    assert!(
+        md.contains(
+            "- Every run's numbers: \
+             `docs/runs/<data set>/validation/e5-by-mesh/seed<N>/<column>.result.json`.\n"
+        ),
+        "{md}"
+    );
+    let mut samba = o.sets[0].clone();
+    samba.dataset = plan::dataset("samba").unwrap();
+    samba.repeated_shapes = false;
+    o.sets.push(samba);
+    let md = markdown(&o, None);
+    assert!(
+        md.contains(
+            "; samba holds no shape twice, so this split is its split by shape, and its runs \
+             are those of the split by shape (its records are in that split's folder);"
+        ),
+        "{md}"
+    );
+    assert!(
+        md.contains(
+            "`docs/runs/<data set>/validation/e5-by-mesh/seed<N>/<column>.result.json` (samba: \
+             `docs/runs/<data set>/validation/e5/seed<N>/<column>.result.json`)."
+        ),
+        "{md}"
+    );
 }
