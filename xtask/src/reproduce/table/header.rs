@@ -127,26 +127,29 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     }
     code(md, o);
     if let Some(records) = &opts.records {
-        let folder = |suffix: &str| {
+        let folder = |set: &str, suffix: &str| {
             format!(
-                "`{}/<data set>/{}/{}{suffix}/seed<N>/<column>.result.json`",
+                "`{}/{set}/{}/{}{suffix}/seed<N>/<column>.result.json`",
                 records.display(),
                 opts.protocol.id,
                 opts.budget.dir_name(),
             )
         };
+        let _ = write!(md, "- Every run's numbers: ");
         if opts.by_shape {
-            let _ = writeln!(md, "- Every run's numbers: {}.", folder(""));
-        } else if unrepeated.is_empty() {
-            let _ = writeln!(md, "- Every run's numbers: {}.", folder("-by-mesh"));
+            let _ = writeln!(md, "{}.", folder("<data set>", ""));
         } else {
-            let _ = writeln!(
-                md,
-                "- Every run's numbers: {} ({}: {}).",
-                folder("-by-mesh"),
-                unrepeated.join(" and "),
-                folder("")
-            );
+            let _ = write!(md, "{}", folder("<data set>", "-by-mesh"));
+            let shared: Vec<String> = unrepeated.iter().map(|s| folder(s, "")).collect();
+            if shared.is_empty() {
+                let _ = writeln!(md, ".");
+            } else {
+                let _ = writeln!(
+                    md,
+                    ", and {} for the runs shared with the split by shape.",
+                    shared.join(" and ")
+                );
+            }
         }
     }
     for note in &o.notes {

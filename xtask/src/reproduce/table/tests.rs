@@ -532,8 +532,9 @@ fn a_page_split_by_mesh_names_the_sets_whose_runs_it_shares_with_the_split_by_sh
     );
     assert!(
         md.contains(
-            "`docs/runs/<data set>/validation/e5-by-mesh/seed<N>/<column>.result.json` (samba: \
-             `docs/runs/<data set>/validation/e5/seed<N>/<column>.result.json`)."
+            "`docs/runs/<data set>/validation/e5-by-mesh/seed<N>/<column>.result.json`, and \
+             `docs/runs/samba/validation/e5/seed<N>/<column>.result.json` for the runs shared \
+             with the split by shape."
         ),
         "{md}"
     );
