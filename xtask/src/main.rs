@@ -14,10 +14,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use xtask::reproduce::{self, Options, plan, plan::Budget};
 
-// Training allocates large tensors on every step; the `meshvae` command uses mimalloc too, so
-// timings of both agree.
-#[global_allocator]
-static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+// The same allocator and settings as the `meshvae` command, so that timings of both agree.
+mod alloc;
 
 #[derive(Parser)]
 #[command(name = "cargo xtask")]
@@ -112,6 +110,7 @@ struct ReproduceArgs {
 }
 
 fn main() -> ExitCode {
+    alloc::keep_freed_memory();
     match Cli::parse().task {
         Task::Datasets { pack } => check_datasets(pack),
         Task::Reproduce(args) => match run_reproduce(args) {

@@ -17,6 +17,7 @@ macro_rules! out {
     };
 }
 
+mod alloc;
 mod demo;
 mod embed;
 mod error;
@@ -33,9 +34,6 @@ mod roundtrip;
 mod simplify;
 mod synth;
 mod train;
-
-#[global_allocator]
-static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 pub use error::CliError;
 
@@ -84,6 +82,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    alloc::keep_freed_memory();
     restore_default_sigpipe();
     let cli = Cli::parse();
     let result = match &cli.command {
