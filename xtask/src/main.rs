@@ -14,7 +14,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use xtask::reproduce::{self, Options, plan, plan::Budget};
 
-// The same allocator and settings as the `meshvae` command, so that timings of both agree.
+// The `meshvae` command's allocator and settings, from its own file, so that timings of both
+// agree.
+#[path = "../../crates/meshvae-cli/src/alloc.rs"]
 mod alloc;
 
 #[derive(Parser)]
