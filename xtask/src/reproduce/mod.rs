@@ -89,7 +89,8 @@ pub struct Options {
     pub quick: bool,
     pub protocol: &'static Protocol,
     /// Draw each seed's split by shape (`meshvae::TrainConfig::split_by_shape`); false draws it
-    /// mesh by mesh, as the paper's random halves.
+    /// mesh by mesh, as the paper's random halves, except on a set without repeated shapes,
+    /// where the two are one split and the by-shape runs are used (`plan::Run::with_split_of`).
     pub by_shape: bool,
     /// Folder of the model folders (and, unless `records` says otherwise, the run results).
     pub work: PathBuf,

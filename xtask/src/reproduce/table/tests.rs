@@ -43,6 +43,20 @@ fn result(column: &str, seed: u64, rms: f64) -> RunResult {
     }
 }
 
+/// `md` from the first occurrence of `start` on.
+fn from<'a>(md: &'a str, start: &str) -> &'a str {
+    &md[md
+        .find(start)
+        .unwrap_or_else(|| panic!("no {start:?} in {md}"))..]
+}
+
+/// The first line of `text` that starts with `start`.
+fn line<'a>(text: &'a str, start: &str) -> &'a str {
+    text.lines()
+        .find(|l| l.starts_with(start))
+        .unwrap_or_else(|| panic!("no line starting {start:?} in {text}"))
+}
+
 fn outcome(results: Vec<RunResult>) -> Outcome {
     let dataset = plan::dataset("synthetic").unwrap();
     let set = mesh_io::synth::generate(&synthetic_config(true))
@@ -155,14 +169,8 @@ fn seed_by_seed_ranks_each_seed_and_counts_where_ours_is_below() {
         md.contains("| network | seed 1 | seed 2 | ranks | ours below it |"),
         "{md}"
     );
-    let section = &md[md.find("## Seed by seed").unwrap()..];
-    let row = |label: &str| {
-        section
-            .lines()
-            .find(|l| l.starts_with(&format!("| {label} |")))
-            .unwrap_or_else(|| panic!("no row {label} in {section}"))
-            .to_string()
-    };
+    let section = from(&md, "## Seed by seed");
+    let row = |label: &str| line(section, &format!("| {label} |"));
     let ours = row("**ours** (modified QEM, mean pooling)");
     assert!(
         ours.contains("| **0.5000** | 1.100 | 1 / 8 | — |"),
@@ -204,12 +212,7 @@ fn ours_is_compared_with_a_partial_column_on_the_seeds_both_finished() {
     assert!(paired(&results, "synthetic", OURS, "graph").is_none());
 
     let md = markdown(&outcome(results), None);
-    let row = |label: &str| {
-        md.lines()
-            .find(|l| l.starts_with(&format!("| {label} |")))
-            .unwrap_or_else(|| panic!("no row {label} in {md}"))
-            .to_string()
-    };
+    let row = |label: &str| line(&md, &format!("| {label} |"));
     assert!(row("uniform remeshing, mean pooling").contains("| -16.67 % (seed 1) |"));
     assert!(row("classical QEM, mean pooling").contains("| +25.00 % |"));
     // The verdict names classical QEM (below ours on both seeds), not remeshing.
@@ -396,14 +399,8 @@ fn the_papers_horse_figure_is_shown_in_our_copys_units() {
     r.test_mean_distance_rigid = Some(0.0177);
     o.results = vec![r];
     let md = markdown(&o, None);
-    let section = &md[md
-        .find("### horse-gallop (")
-        .unwrap_or_else(|| panic!("{md}"))..];
-    let row = |start: &str| {
-        (section.lines())
-            .find(|l| l.starts_with(start))
-            .unwrap_or_else(|| panic!("{section}"))
-    };
+    let section = from(&md, "### horse-gallop (");
+    let row = |start: &str| line(section, start);
     // 0.0119 × 1.6768815 = 0.019955.
     let ours = row("| **ours** |");
     assert!(
@@ -437,15 +434,8 @@ fn the_claims_are_counted_seed_by_seed_and_ours_is_ranked() {
         results.push(result("qem", seed, 1.0));
     }
     let md = markdown(&outcome(results), None);
-    let section = &md[md
-        .find("## The paper's claims")
-        .unwrap_or_else(|| panic!("{md}"))..];
-    let row = |label: &str| {
-        (section.lines())
-            .find(|l| l.starts_with(&format!("| {label} |")))
-            .unwrap_or_else(|| panic!("{section}"))
-            .to_string()
-    };
+    let section = from(&md, "## The paper's claims");
+    let row = |label: &str| line(section, &format!("| {label} |"));
     // (0.6333 − 0.7) / 0.7 = −9.52 %.
     let max = row("modified QEM, max pooling");
     assert!(
@@ -478,15 +468,8 @@ fn the_framework_claims_name_the_seeds_on_which_ours_is_lower() {
         }
     }
     let md = markdown(&outcome(results), None);
-    let section = &md[md
-        .find("The paper's `table:ERMS` puts ours below")
-        .unwrap_or_else(|| panic!("{md}"))..];
-    let row = |label: &str| {
-        (section.lines())
-            .find(|l| l.starts_with(&format!("| {label}")))
-            .unwrap_or_else(|| panic!("{section}"))
-            .to_string()
-    };
+    let section = from(&md, "The paper's `table:ERMS` puts ours below");
+    let row = |label: &str| line(section, &format!("| {label}"));
     assert!(
         row("Tan et al. 2018")
             .ends_with("| not settled: ours lower on seed 1, not lower on seed 2 |"),
