@@ -76,7 +76,6 @@ fn pack_joins_sets_of_one_connectivity_into_a_labelled_set() {
         1,
         "not an empty folder",
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -199,5 +198,4 @@ fn train_with_labels_then_generate_by_label() {
         1,
         "not conditional",
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -119,7 +119,6 @@ fn the_demo_writes_every_picture_mesh_and_report_it_announces() {
         "{csv}"
     );
     assert!(csv.starts_with("name,frame,") && csv.lines().next().unwrap().ends_with(",label"));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -148,5 +147,4 @@ fn synth_writes_capsules_of_the_resolution_it_is_given() {
         "rings",
     );
     assert!(!bad.join("0000.obj").exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }

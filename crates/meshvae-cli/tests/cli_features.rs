@@ -50,7 +50,7 @@ fn features_writes_normalised_or_raw_features_of_every_frame() {
 
 #[test]
 fn roundtrip_reconstructs_every_frame_to_float_rounding() {
-    let (_, set, _) = synth_case("roundtrip", 2);
+    let (_dir, set, _) = synth_case("roundtrip", 2);
     let printed = ok(&meshvae(&["roundtrip", s(&set), "--json"]));
     let report: serde_json::Value = serde_json::from_str(&printed).unwrap();
     assert_eq!(

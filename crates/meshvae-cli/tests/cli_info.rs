@@ -71,7 +71,6 @@ fn mixed_connectivity_names_the_first_mismatching_file() {
         &out,
         &["mesh_0000.obj", "9971 vertices", "0001.obj has 8431"],
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -105,7 +104,6 @@ fn broken_files_give_clear_messages() {
         write(&dir, "b.obj", text);
         let out = meshvae(&["info", dir.to_str().unwrap()]);
         assert_fails_with(&out, parts);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
 
@@ -123,7 +121,6 @@ fn empty_and_missing_sets() {
     );
     let missing = dir.join("nowhere");
     assert_fails_with(&meshvae(&["info", missing.to_str().unwrap()]), &["nowhere"]);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -183,7 +180,6 @@ fn pack_then_info_reads_the_cache() {
     );
     std::fs::write(&cache, b"garbage").unwrap();
     assert_fails_with(&meshvae(&["info", cache.to_str().unwrap()]), &["set.mvset"]);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -208,5 +204,4 @@ fn a_full_disk_on_standard_output_is_an_error_not_a_panic() {
             .unwrap();
         assert_fails_with(&out, &["cannot write to standard output"]);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -336,7 +336,6 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
         "vertices",
     );
     fails_with(&meshvae(&["eval", s(&dir)]), 1, "not a model folder");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Kills training ten times at pseudo-random moments while it writes a checkpoint after every
@@ -344,7 +343,7 @@ fn train_eval_reconstruct_on_a_synthetic_set() {
 #[test]
 fn killed_runs_leave_no_temporary_files_and_readable_folders() {
     use std::process::{Command, Stdio};
-    let (dir, set, model) = synth_case("kill", 3);
+    let (_dir, set, model) = synth_case("kill", 3);
     let args = |resume: bool, epochs: &str| -> Vec<String> {
         let mut a = vec![
             "train",
@@ -419,7 +418,6 @@ fn killed_runs_leave_no_temporary_files_and_readable_folders() {
     }
     let more = (done["epochs"].as_u64().unwrap() + 3).to_string();
     ok(&run(args(true, &more)));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn temporaries(dir: &std::path::Path) -> Vec<String> {

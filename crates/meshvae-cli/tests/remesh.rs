@@ -84,7 +84,6 @@ fn simplify_method_remesh_writes_the_coarse_mesh_and_the_same_report_keys() {
     // The remeshing's edges are the more even.
     let cv = |r: &serde_json::Map<String, serde_json::Value>| r["edge_cv"].as_f64().unwrap();
     assert!(cv(&remesh) < cv(&qem));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -106,7 +105,6 @@ fn simplify_method_remesh_text_report_and_ratio() {
     assert!(text.contains("642 -> 161"), "{text}");
     assert!(text.contains("lambda               -"), "{text}");
     assert_eq!(mesh_io::read_mesh(&out).unwrap().value.vertex_count(), 161);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -140,5 +138,4 @@ fn simplify_rejects_lambda_with_remesh_and_unknown_methods() {
     ]);
     fails_with(&bad_ratio, 1, "ratio");
     assert!(!out.exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }

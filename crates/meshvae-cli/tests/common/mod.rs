@@ -13,17 +13,44 @@ pub fn meshvae(args: &[&str]) -> Output {
         .expect("the meshvae binary runs")
 }
 
+/// A test's folder in the system's temporary directory, removed with what it holds when dropped
+/// unless the test is failing (its models run to hundreds of MB; a failure's files are kept to
+/// look at).
+#[derive(Debug)]
+pub struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
 /// An empty folder of the system's temporary directory, unique to this test process.
-pub fn scratch(name: &str) -> PathBuf {
+pub fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("meshvae-cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 /// A scratch folder `name` with a synthetic set of `per_label` meshes per label in `set/`:
 /// (the folder, the set, `model/` beside it, not created).
-pub fn synth_case(name: &str, per_label: usize) -> (PathBuf, PathBuf, PathBuf) {
+pub fn synth_case(name: &str, per_label: usize) -> (Scratch, PathBuf, PathBuf) {
     let dir = scratch(name);
     let (set, model) = (dir.join("set"), dir.join("model"));
     let n = per_label.to_string();
