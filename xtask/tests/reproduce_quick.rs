@@ -336,6 +336,22 @@ fn quick_reproduce_writes_every_table_and_resumes() {
             md.contains("of which 1 was trained in part by other code"),
             "{md}"
         );
+        // A run stopped before its first checkpoint, begun by other code, restarts from step 1:
+        // this code alone trains it, and the record names no other.
+        for file in [
+            "ours.result.json",
+            "ours/weights.safetensors",
+            "ours/run.json",
+        ] {
+            std::fs::remove_file(seed_dir.join(file)).unwrap();
+        }
+        assert!(!seed_dir.join("ours/checkpoint.safetensors").exists());
+        let other = r#"[{"describe": "0123456789ab", "dirty": false}]"#;
+        std::fs::write(seed_dir.join("ours.commits.json"), other).unwrap();
+        reproduce_with(&work, &dir.join("restarted.md"), &converged);
+        let restarted = result_in(&work, "synthetic", "converged-s4", "ours");
+        assert_eq!(restarted.trained_by, None);
+        assert_eq!(restarted.test_rms, ours.test_rms);
     }
     if let Some(commit) = &commit {
         assert!(

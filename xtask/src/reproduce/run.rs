@@ -305,8 +305,10 @@ pub fn execute(
     // again: its checkpoint was dropped when the result was first written.
     let trained_by = TrainedBy::of(&out);
     if !(resume && training_finished(&folder, run.budget)?) {
+        // Stopped before its first checkpoint, a run restarts from step 1: this code's alone.
+        let continues = resume && folder.checkpoint().is_file();
         trained_by
-            .note(place.commit, !resume)
+            .note(place.commit, !continues)
             .map_err(|e| ReproError::io(&out, e))?;
         meshvae::train(&request, &options, |record| {
             session_train += record.seconds;
