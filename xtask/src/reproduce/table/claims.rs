@@ -31,11 +31,16 @@ fn wins(results: &[RunResult], dataset: &str, column: &str) -> (usize, usize) {
     (below, both)
 }
 
-/// "holds", "does not hold" or "not settled" for ours below the other on `below` of `both` seeds.
-pub(super) fn verdict(below: usize, both: usize) -> &'static str {
+/// "holds", "does not hold" or "not settled" for ours below the other on `below` of `both`
+/// seeds, of the `planned` seeds: a verdict of fewer seeds than planned is one "so far" (the
+/// seeds still to run may undo it; a mixed one is settled already).
+pub(super) fn verdict(below: usize, both: usize, planned: u64) -> &'static str {
+    let partial = (both as u64) < planned;
     match (below, both) {
         (_, 0) => "no shared seed",
+        (b, n) if b == n && partial => "**holds** so far",
         (b, n) if b == n => "**holds**",
+        (0, _) if partial => "**does not hold** so far",
         (0, _) => "**does not hold**",
         _ => "not settled",
     }
@@ -60,7 +65,8 @@ pub(super) fn claims(md: &mut String, o: &Outcome) {
         "## The paper's claims\n\nOurs against every other column: on how many of the seeds \
          both have finished ours has the lower test RMS, and (ours − other) / other on their \
          mean. A claim **holds** on a data set when ours is lower on every such seed, **does \
-         not hold** when on none, and is not settled in between: a column's spread over the \
+         not hold** when on none (\"so far\" while seeds are missing), and is not settled in \
+         between: a column's spread over the \
          seeds is as large as the paper's margins between columns, so only a gap that keeps \
          its sign on every split settles anything.\n\n| ours against | paper |",
     );
@@ -88,7 +94,7 @@ pub(super) fn claims(md: &mut String, o: &Outcome) {
                     let _ = write!(
                         md,
                         " {}: {below} of {both}, {} |",
-                        verdict(below, both),
+                        verdict(below, both, o.options.seeds),
                         percent(p.change())
                     );
                 }
@@ -131,9 +137,13 @@ mod tests {
 
     #[test]
     fn a_claim_holds_only_on_every_seed() {
-        assert_eq!(verdict(3, 3), "**holds**");
-        assert_eq!(verdict(0, 3), "**does not hold**");
-        assert_eq!(verdict(2, 3), "not settled");
-        assert_eq!(verdict(0, 0), "no shared seed");
+        assert_eq!(verdict(3, 3, 3), "**holds**");
+        assert_eq!(verdict(0, 3, 3), "**does not hold**");
+        assert_eq!(verdict(2, 3, 3), "not settled");
+        assert_eq!(verdict(0, 0, 3), "no shared seed");
+        // Fewer seeds than planned: a one-sided count may still turn.
+        assert_eq!(verdict(1, 1, 3), "**holds** so far");
+        assert_eq!(verdict(0, 2, 3), "**does not hold** so far");
+        assert_eq!(verdict(1, 2, 3), "not settled");
     }
 }
