@@ -50,8 +50,8 @@ struct ReproduceArgs {
     /// page still shows every finished run [default: all].
     #[arg(long, value_delimiter = ',')]
     columns: Vec<String>,
-    /// Train every run for N epochs at the authors' constant learning rate of 1e-3 (the plan of
-    /// the 600-epoch records, `e600/`) instead of until converged.
+    /// Train every run for N epochs at the authors' constant learning rate of 1e-3 (runs and
+    /// records under `e<N>/`, page `docs/results-<N>-epochs.md`) instead of until converged.
     #[arg(long)]
     epochs: Option<usize>,
     /// Train every run as `meshvae train` does by default, until the validation loss converges

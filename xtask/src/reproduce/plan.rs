@@ -299,7 +299,8 @@ pub fn dataset(name: &str) -> Option<&'static Dataset> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Budget {
     /// Exactly this many epochs at the authors' constant learning rate of 1e-3, without early
-    /// stop: how every run recorded under `docs/runs/<set>/<protocol>/e600` trained.
+    /// stop (runs under `<set>/<protocol>/e<epochs>`): the first reproduction's plan, whose
+    /// networks were still learning at 600 epochs.
     Epochs(usize),
     /// `meshvae train`'s default training (`TrainConfig::default()`'s learning rate and
     /// schedule): until the validation loss converges, or at most `max_steps` optimizer steps

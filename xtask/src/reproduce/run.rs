@@ -457,9 +457,9 @@ mod tests {
     use crate::reproduce::plan::{self, COLUMNS, PROTOCOLS};
     use meshvae::{DEFAULT_MAX_STEPS, RunStatus, Selection};
 
-    /// A record of the 600-epoch plan as committed (written before the converged plan).
-    const OLD_RECORD: &str =
-        include_str!("../../../docs/runs/horse-gallop/validation/e600/seed1/ours.result.json");
+    /// A record of the 600-epoch plan as it was written before the converged plan (and before
+    /// records kept their commit and settings).
+    const OLD_RECORD: &str = include_str!("../../testdata/e600-ours.result.json");
 
     fn run(budget: Budget) -> Run {
         Run {
