@@ -127,13 +127,20 @@ fn verdict(md: &mut String, o: &Outcome, dataset: &str) {
             ));
         }
     }
-    let others = columns_of(Group::Ablation)
-        .filter(|c| !c.is_ours())
-        .any(|c| aggregate(&o.results, dataset, c.id).is_some());
-    if !others {
+    let columns = columns_of(Group::Ablation).count();
+    let finished = columns_of(Group::Ablation)
+        .filter(|c| aggregate(&o.results, dataset, c.id).is_some())
+        .count();
+    if finished == 1 {
         let _ = writeln!(
             md,
             "On {dataset}, no other ablation column has finished a run yet: nothing to rank.\n"
+        );
+    } else if below.is_empty() && finished < columns {
+        let _ = writeln!(
+            md,
+            "On {dataset}, ours has the lowest test RMS of the {finished} ablation columns \
+             finished so far (of {columns}).\n"
         );
     } else if below.is_empty() {
         let _ = writeln!(
