@@ -8,7 +8,7 @@
 //!   and what differs from today's;
 //! - [`check`]: `--check RECORD`, one record retrained and compared digit by digit;
 //! - [`stats`]: mean ± std over seeds;
-//! - [`table`]: the markdown;
+//! - [`table`]: the markdown, and each page's summary for the README (`table::summary`);
 //! - [`params`]: parameter counts (ours by the paper's formula, Tan et al.'s derived);
 //! - [`paper`]: the paper's numbers.
 //!
@@ -571,5 +571,35 @@ pub fn write_results(outcome: &Outcome) -> Result<(), ReproError> {
         std::fs::create_dir_all(parent).map_err(|e| ReproError::io(parent, e))?;
     }
     mesh_io::atomic::write_bytes_atomic(path, markdown.as_bytes())
-        .map_err(|e| ReproError::io(path, e))
+        .map_err(|e| ReproError::io(path, e))?;
+    write_summary(outcome)
+}
+
+/// Rewrites the page's summary in the README of the folder above the page's (`docs/x.md` →
+/// `README.md`), where that README holds the page's markers (`table::summary::begin_marker`):
+/// the README's figures then come from the same records as the page.
+fn write_summary(outcome: &Outcome) -> Result<(), ReproError> {
+    let page = &outcome.options.results;
+    let Some(root) = page.parent().and_then(Path::parent) else {
+        return Ok(());
+    };
+    let readme = root.join("README.md");
+    let text = match std::fs::read_to_string(&readme) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(ReproError::io(&readme, e)),
+    };
+    let Ok(link) = page.strip_prefix(root) else {
+        return Ok(());
+    };
+    let link: Vec<String> = (link.components())
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    let link = link.join("/");
+    let summary = table::summary::summary(outcome, &link);
+    match table::summary::replace_block(&text, &link, &summary) {
+        Some(new) if new != text => mesh_io::atomic::write_bytes_atomic(&readme, new.as_bytes())
+            .map_err(|e| ReproError::io(&readme, e)),
+        _ => Ok(()),
+    }
 }

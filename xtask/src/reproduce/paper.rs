@@ -224,6 +224,16 @@ pub fn matching_row(dataset: &str) -> Option<&'static str> {
     }
 }
 
+/// How our data set stands to its [`matching_row`]: what a reader must know before setting the
+/// two figures side by side.
+pub fn matching_note(dataset: &str) -> &'static str {
+    match dataset {
+        "horse-gallop" => "the same animation",
+        "samba" => "the same subject and template, another sequence",
+        _ => "no matching data set",
+    }
+}
+
 /// Our copy of horse-gallop is Sumner and Popović's original files scaled by this factor about
 /// the origin (measured on every vertex of the 48 frames: the least-squares factor is the same
 /// for each, and no vertex is further than 8e-8 from it; the faces and the vertex order are the

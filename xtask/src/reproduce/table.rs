@@ -16,6 +16,7 @@ mod paper_layout;
 mod parameters;
 mod seeds;
 mod structures;
+pub mod summary;
 
 /// Opens the block of results.md that a regeneration keeps.
 pub const BEGIN_HAND_WRITTEN: &str = "<!-- BEGIN hand-written: kept by cargo xtask reproduce -->";

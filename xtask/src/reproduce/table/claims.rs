@@ -12,7 +12,7 @@ use crate::reproduce::run::RunResult;
 use std::fmt::Write;
 
 /// Seeds on which ours is below `column` on `dataset`, and the seeds both have.
-fn wins(results: &[RunResult], dataset: &str, column: &str) -> (usize, usize) {
+pub(super) fn wins(results: &[RunResult], dataset: &str, column: &str) -> (usize, usize) {
     let rms = |col: &str, seed: u64| {
         (results.iter())
             .find(|r| r.dataset == dataset && r.column == col && r.seed == seed)
@@ -47,7 +47,7 @@ pub(super) fn verdict(below: usize, both: usize, planned: u64) -> &'static str {
 }
 
 /// Ours' rank (1 = lowest test RMS) among the ablation columns finished on `seed`.
-fn rank(results: &[RunResult], dataset: &str, seed: u64) -> Option<(usize, usize)> {
+pub(super) fn rank(results: &[RunResult], dataset: &str, seed: u64) -> Option<(usize, usize)> {
     let rms = |col: &str| {
         (results.iter())
             .find(|r| r.dataset == dataset && r.column == col && r.seed == seed)

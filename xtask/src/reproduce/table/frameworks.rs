@@ -13,10 +13,10 @@ use crate::reproduce::stats::{sig, thousands};
 use std::fmt::Write;
 
 /// A network's figure in a row of the paper's table, if the paper has one.
-type PaperFigure = fn(&FrameworkRow) -> Option<f64>;
+pub(super) type PaperFigure = fn(&FrameworkRow) -> Option<f64>;
 
 /// The rows of the table: column id, the paper's name of the network, its figure.
-const ROWS: [(&str, &str, PaperFigure); 5] = [
+pub(super) const ROWS: [(&str, &str, PaperFigure); 5] = [
     ("tan2018", "Tan et al. 2018 (mesh VAE)", |r| r.tan),
     ("spatial", "Gao et al. 2018 (= Only Spatial Conv.)", |r| {
         Some(r.gao)
@@ -126,7 +126,11 @@ pub(super) fn frameworks(md: &mut String, o: &Outcome) {
 
 /// The seeds both finished on which ours' rigidly aligned mean distance is below `column`'s,
 /// and those on which it is not.
-fn seeds_below(results: &[RunResult], dataset: &str, column: &str) -> (Vec<u64>, Vec<u64>) {
+pub(super) fn seeds_below(
+    results: &[RunResult],
+    dataset: &str,
+    column: &str,
+) -> (Vec<u64>, Vec<u64>) {
     let rigid = |col: &str, seed: u64| {
         (results.iter())
             .find(|r| r.dataset == dataset && r.column == col && r.seed == seed)

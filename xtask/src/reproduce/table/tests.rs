@@ -3,7 +3,7 @@ use crate::reproduce::plan::{self, Budget, OURS, PROTOCOLS};
 use crate::reproduce::{LoadedSet, Machine, Options, synthetic_config};
 use meshvae::ModelConfig;
 
-fn result(column: &str, seed: u64, rms: f64) -> RunResult {
+pub(super) fn result(column: &str, seed: u64, rms: f64) -> RunResult {
     RunResult {
         dataset: "synthetic".into(),
         protocol: PROTOCOLS[0].id.into(),
@@ -57,7 +57,7 @@ fn line<'a>(text: &'a str, start: &str) -> &'a str {
         .unwrap_or_else(|| panic!("no line starting {start:?} in {text}"))
 }
 
-fn outcome(results: Vec<RunResult>) -> Outcome {
+pub(super) fn outcome(results: Vec<RunResult>) -> Outcome {
     let dataset = plan::dataset("synthetic").unwrap();
     let set = mesh_io::synth::generate(&synthetic_config(true))
         .unwrap()
