@@ -142,6 +142,15 @@ fn quick_reproduce_writes_every_table_and_resumes() {
             "{dataset}"
         );
         assert!(md.contains(&format!("| {dataset} (ours) |")), "{dataset}");
+        // Beside the page, a picture of every run's error, linked from it.
+        let picture = format!("results-{dataset}.png");
+        assert!(
+            md.contains(&format!("]({picture})")),
+            "{dataset}: no link to {picture}"
+        );
+        let png = std::fs::read(dir.join(&picture)).unwrap();
+        let image = mesh_render::Image::decode_png(&png).unwrap();
+        assert!(image.width >= 600 && image.height > 150, "{dataset}");
         for column in columns_on(dataset) {
             assert!(md.contains(column.label), "column {}", column.id);
             let r = result(&work, dataset, column.id);

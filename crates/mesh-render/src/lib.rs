@@ -4,8 +4,8 @@
 //! [`error_colors`]), 2-D point series, curves over steps or epochs. **Out:** RGB [`Image`]s —
 //! shaded renders ([`render`]), captioned contact sheets ([`sheet`]), colour bars
 //! ([`with_colorbar`]), scatter plots ([`scatter`]), line plots of training curves with a log
-//! y axis and markers ([`line_plot`]), side-by-side panels ([`hstack`]) — written as PNG
-//! ([`Image::save_png`], atomically).
+//! y axis and markers ([`line_plot`]), dot plots of a few values per category ([`dot_plot`]),
+//! side-by-side panels ([`hstack`]) — written as PNG ([`Image::save_png`], atomically).
 //!
 //! [`render`] is a software rasterizer: orthographic camera from one of six [`View`]s, or by
 //! default `View::Auto` (along the box's thinnest axis, y up where possible: long shapes are seen
@@ -45,6 +45,7 @@ mod axis;
 mod camera;
 mod chart_backend;
 pub mod colormap;
+mod dots;
 mod error;
 mod image;
 mod lines;
@@ -55,6 +56,7 @@ mod text;
 
 pub use camera::{Bounds, MARGIN, View};
 pub use colormap::{error_color, error_colors};
+pub use dots::{DotPlot, DotRow, dot_plot};
 pub use error::RenderError;
 pub use image::{Image, MAX_PIXELS, MAX_SIDE, hstack};
 pub use lines::{Curve, LinePlot, Marker, line_plot};

@@ -570,6 +570,7 @@ pub fn write_results(outcome: &Outcome) -> Result<(), ReproError> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| ReproError::io(parent, e))?;
     }
+    table::figure::write_figures(outcome)?;
     mesh_io::atomic::write_bytes_atomic(path, markdown.as_bytes())
         .map_err(|e| ReproError::io(path, e))?;
     write_summary(outcome)

@@ -8,6 +8,7 @@ use std::fmt::Write;
 
 mod ablation;
 mod claims;
+pub mod figure;
 mod frameworks;
 mod header;
 mod improvements;

@@ -3,7 +3,7 @@
 //! column wins everywhere by a little or on one seed by a lot; the paper's claims are about the
 //! former.
 
-use super::columns_of;
+use super::{columns_of, figure};
 use crate::reproduce::Outcome;
 use crate::reproduce::plan::{COLUMNS, Group, OURS};
 use crate::reproduce::run::RunResult;
@@ -27,7 +27,7 @@ pub(super) fn seed_by_seed(md: &mut String, o: &Outcome) {
             );
             wrote_heading = true;
         }
-        table(md, name, &runs);
+        table(md, name, &runs, &figure::link(o, name));
         if let Some(max_steps) = o.options.budget.max_steps() {
             stops(md, &runs, max_steps);
         }
@@ -35,7 +35,7 @@ pub(super) fn seed_by_seed(md: &mut String, o: &Outcome) {
     }
 }
 
-fn table(md: &mut String, dataset: &str, runs: &[&RunResult]) {
+fn table(md: &mut String, dataset: &str, runs: &[&RunResult], picture: &str) {
     let mut seeds: Vec<u64> = runs.iter().map(|r| r.seed).collect();
     seeds.sort_unstable();
     seeds.dedup();
@@ -55,6 +55,7 @@ fn table(md: &mut String, dataset: &str, runs: &[&RunResult]) {
     };
 
     let _ = writeln!(md, "### {dataset}\n");
+    md.push_str(picture);
     md.push_str("| network |");
     for s in &seeds {
         let _ = write!(md, " seed {s} |");
