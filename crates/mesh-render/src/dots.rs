@@ -10,6 +10,7 @@ use crate::image::Image;
 use crate::lines::Marker;
 use crate::plot::{
     AXIS_COLOR, GRID_BOLD, GRID_LIGHT, Range, SERIES_COLORS, check_plot_size, padded, rgb,
+    x_label_area,
 };
 use crate::text::{FAMILY, draw_error, ensure_font};
 use plotters::prelude::*;
@@ -157,13 +158,7 @@ fn draw(
             w.max(root.estimate_text_size(&r.label, &tick_style)?.0),
         )
     })? as i32;
-    let x_area = (tick_px
-        + 10.0
-        + if plot.x_label.is_empty() {
-            0.0
-        } else {
-            desc_px * 1.6
-        }) as i32;
+    let x_area = x_label_area(tick_px, desc_px, !plot.x_label.is_empty()) as i32;
     let plot_w = (plot.width as i32 - 2 * margin - label_w - 10).max(1);
     let ticks = linear_ticks(
         &x_range,

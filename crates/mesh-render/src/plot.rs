@@ -139,6 +139,12 @@ pub(crate) fn padded(lo: f64, hi: f64, fraction: f64) -> Range {
     }
 }
 
+/// Height of the band under a plot area for the x tick labels (`tick_px` high) and, when there
+/// is one, the x axis description (`desc_px` high).
+pub(crate) fn x_label_area(tick_px: f64, desc_px: f64, described: bool) -> f64 {
+    tick_px + 10.0 + if described { desc_px * 1.6 } else { 0.0 }
+}
+
 pub(crate) fn rgb(c: [u8; 3]) -> RGBColor {
     RGBColor(c[0], c[1], c[2])
 }

@@ -4,7 +4,7 @@
 use super::{DrawResult, LinePlot, Marker};
 use crate::axis::{linear_ticks, log_ticks, tick_label};
 use crate::chart_backend::ChartBackend;
-use crate::plot::Range;
+use crate::plot::{Range, x_label_area};
 use crate::text::FAMILY;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -65,14 +65,7 @@ pub(super) fn layout(
     };
     let row_px = (tick_px * 1.35).ceil();
     let any_label = markers.iter().any(|m| !m.label.is_empty());
-    let x_area = (tick_px
-        + 10.0
-        + if plot.x_label.is_empty() {
-            0.0
-        } else {
-            desc_px * 1.6
-        })
-    .ceil();
+    let x_area = x_label_area(tick_px, desc_px, !plot.x_label.is_empty()).ceil();
     let label_gap = 2.4 * tick_px;
 
     // y ticks, for the plot height expected with one row of marker labels.
