@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 use xtask::reproduce::plan::{COLUMNS, Column, PROTOCOLS};
-use xtask::reproduce::run::RunResult;
+use xtask::reproduce::record::RunResult;
 
 /// The columns that run on `dataset`: the position networks need 1,024 vertices, more than the
 /// quick synthetic set's.

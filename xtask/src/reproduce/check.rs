@@ -6,7 +6,8 @@
 
 use super::commit::Commit;
 use super::plan::{self, Run};
-use super::run::{self, Place, RunResult, RunSettings};
+use super::record::{self, RunResult, RunSettings};
+use super::run::{self, Place};
 use super::{LoadedSet, ReproError};
 use meshvae::Platform;
 use std::fmt::Write;
@@ -90,7 +91,7 @@ pub fn check(
     work: &Path,
     commit: Option<&Commit>,
 ) -> Result<Checked, ReproError> {
-    let stored = run::read_record(record_path)?;
+    let stored = record::read_record(record_path)?;
     let run = run_of(&stored, record_path)?;
     let model = run.column.model().map_err(|e| ReproError::run(&run, e))?;
     let settings = stored

@@ -7,7 +7,7 @@ use std::fmt;
 use std::path::Path;
 use std::process::Command;
 
-/// The code of a run: [`RunResult::commit`](super::run::RunResult::commit).
+/// The code of a run: [`RunResult::commit`](super::record::RunResult::commit).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Commit {
     /// `git describe --always --abbrev=12`: the commit's hash, or the nearest tag and the

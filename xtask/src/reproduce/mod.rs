@@ -4,6 +4,7 @@
 //!
 //! - [`plan`]: the run table (data sets, columns, protocols) and each run's folder;
 //! - [`run`]: one run — train with resumption, evaluate, record a result JSON;
+//! - [`record`]: that JSON (`RunResult`), and whether a record is today's or stale;
 //! - [`settings`], [`commit`] (and `meshvae::Platform`, the machine): what a record says made it,
 //!   and what differs from today's;
 //! - [`check`]: `--check RECORD`, one record retrained and compared digit by digit;
@@ -27,6 +28,7 @@ pub mod commit;
 pub mod paper;
 pub mod params;
 pub mod plan;
+pub mod record;
 pub mod run;
 pub mod settings;
 pub mod stats;
@@ -37,7 +39,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mesh_io::MeshSet;
 use mesh_io::synth::SynthConfig;
 use plan::{Budget, Column, Dataset, Protocol, Run, Source};
-use run::{Recorded, RunResult};
+use record::{Recorded, RunResult};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -335,7 +337,7 @@ pub fn reproduce(options: Options, mut notes: Vec<String>) -> Result<Outcome, Re
                 runs_bar.inc(1);
                 continue;
             }
-            let record = run::recorded(run, options.records())?;
+            let record = record::recorded(run, options.records())?;
             if let Recorded::Current(done) = record {
                 reused += 1;
                 results.push(*done);
@@ -523,7 +525,7 @@ impl Trainer<'_> {
         };
         let result = run::execute(
             run,
-            &run::RunSettings::of(run, &model),
+            &record::RunSettings::of(run, &model),
             &self.loaded.set,
             self.loaded.source.clone(),
             place,

@@ -8,7 +8,7 @@ use meshvae::{ModelConfig, ModelSpec, TrainConfig};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-/// The settings of [`RunResult::settings`](super::run::RunResult::settings), as `config.json`
+/// The settings of [`RunResult::settings`](super::record::RunResult::settings), as `config.json`
 /// of the model folder holds them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunSettings {

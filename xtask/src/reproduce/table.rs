@@ -2,7 +2,7 @@
 
 use super::Outcome;
 use super::plan::{COLUMNS, Column, Group};
-use super::run::RunResult;
+use super::record::RunResult;
 use super::stats::Stat;
 use std::fmt::Write;
 

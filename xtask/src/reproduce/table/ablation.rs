@@ -4,7 +4,7 @@
 use super::{aggregate, columns_of, paired, percent};
 use crate::reproduce::paper;
 use crate::reproduce::plan::{Group, OURS};
-use crate::reproduce::run::RunResult;
+use crate::reproduce::record::RunResult;
 use crate::reproduce::stats::thousands;
 use crate::reproduce::{LoadedSet, Outcome};
 use std::fmt::Write;

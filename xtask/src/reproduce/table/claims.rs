@@ -8,7 +8,7 @@ use super::{columns_of, paired, percent};
 use crate::reproduce::Outcome;
 use crate::reproduce::paper;
 use crate::reproduce::plan::{Group, OURS};
-use crate::reproduce::run::RunResult;
+use crate::reproduce::record::RunResult;
 use std::fmt::Write;
 
 /// Seeds on which ours is below `column` on `dataset`, and the seeds both have.

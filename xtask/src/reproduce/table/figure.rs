@@ -4,7 +4,7 @@
 //! `<page>-<data set>.png`.
 
 use crate::reproduce::plan::{COLUMNS, OURS};
-use crate::reproduce::run::RunResult;
+use crate::reproduce::record::RunResult;
 use crate::reproduce::{Outcome, ReproError, paper};
 use mesh_render::{DotPlot, DotRow, Marker, dot_plot};
 use std::path::{Path, PathBuf};

@@ -8,7 +8,7 @@ use super::claims::verdict;
 use crate::reproduce::Outcome;
 use crate::reproduce::paper::{self, FrameworkRow};
 use crate::reproduce::plan::{OURS, column};
-use crate::reproduce::run::RunResult;
+use crate::reproduce::record::RunResult;
 use crate::reproduce::stats::{sig, thousands};
 use std::fmt::Write;
 

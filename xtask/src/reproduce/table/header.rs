@@ -3,7 +3,7 @@
 
 use crate::reproduce::Outcome;
 use crate::reproduce::plan::Budget;
-use crate::reproduce::run::RunResult;
+use crate::reproduce::record::RunResult;
 use crate::reproduce::stats::{Stat, sig, thousands};
 use meshvae::TrainConfig;
 use std::fmt::Write;

@@ -6,7 +6,7 @@
 use super::{columns_of, figure};
 use crate::reproduce::Outcome;
 use crate::reproduce::plan::{COLUMNS, Group, OURS};
-use crate::reproduce::run::RunResult;
+use crate::reproduce::record::RunResult;
 use crate::reproduce::stats::{sig, thousands};
 use std::fmt::Write;
 

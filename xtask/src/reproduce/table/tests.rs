@@ -356,7 +356,7 @@ fn rigid_distances_stand_beside_the_paper_and_copies_are_split_out() {
     for seed in 1..=2 {
         let mut r = result(OURS, seed, 0.02);
         r.test_mean_distance_rigid = Some(0.01 * seed as f64);
-        r.copy_split = Some(crate::reproduce::run::CopySplitRecord {
+        r.copy_split = Some(crate::reproduce::record::CopySplitRecord {
             copy_in_training_meshes: 3 + seed as usize,
             copy_in_training_mean_distance_rigid: 0.005,
             unseen_meshes: 5 - seed as usize,
