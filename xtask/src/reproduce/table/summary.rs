@@ -133,7 +133,7 @@ fn runs_sentence(o: &Outcome, dataset: &str, vertices: usize) -> String {
     let stops = match o.options.budget {
         Budget::Epochs(_) => String::new(),
         Budget::Converged { .. } if converged == finished => match finished {
-            1 => ", converged".into(),
+            1 => "; it converged".into(),
             _ => ", every one converged".into(),
         },
         Budget::Converged { .. } => format!(
@@ -149,7 +149,8 @@ fn runs_sentence(o: &Outcome, dataset: &str, vertices: usize) -> String {
             o.options.seeds
         )
     } else {
-        format!("{finished} of the {planned} runs have finished so far{stops}.")
+        let verb = if finished == 1 { "has" } else { "have" };
+        format!("{finished} of the {planned} runs {verb} finished so far{stops}.")
     }
 }
 
