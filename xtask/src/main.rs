@@ -4,7 +4,8 @@
 //!   has the expected counts; with `--pack`, writes each as a `.mvset` cache into DIR.
 //! - `cargo xtask reproduce [--dataset …] [--epochs N] [--split-by-mesh] [--seeds N] [--quick]`:
 //!   trains the paper's ablations on our data sets, each run until converged (or for N epochs),
-//!   and writes `docs/results.md` or the page of its plan (see `xtask::reproduce`).
+//!   and writes `docs/results.md` or the page of its plan (see `xtask::reproduce`), a picture per
+//!   data set beside it, and the page's summary into README.md between its markers.
 //! - `cargo xtask reproduce --check RECORD`: trains one recorded run again and sets its numbers
 //!   beside the stored ones.
 

@@ -115,9 +115,7 @@ impl Paired {
 
     /// "seed 1" or "seeds 1, 3".
     pub fn seed_list(&self) -> String {
-        let list: Vec<String> = self.seeds.iter().map(u64::to_string).collect();
-        let noun = if list.len() == 1 { "seed" } else { "seeds" };
-        format!("{noun} {}", list.join(", "))
+        seed_list(&self.seeds)
     }
 }
 
@@ -160,6 +158,15 @@ pub fn paired(results: &[RunResult], dataset: &str, ours: &str, column: &str) ->
 fn all_of(runs: &[&RunResult], f: impl Fn(&RunResult) -> Option<f64>) -> Option<Stat> {
     let values: Option<Vec<f64>> = runs.iter().map(|r| f(r)).collect();
     Stat::of(&values?)
+}
+
+/// "seed 1" or "seeds 1, 3": how every sentence of the page and the README names seeds.
+pub(super) fn seed_list(seeds: &[u64]) -> String {
+    let names: Vec<String> = seeds.iter().map(u64::to_string).collect();
+    match names.len() {
+        1 => format!("seed {}", names[0]),
+        _ => format!("seeds {}", names.join(", ")),
+    }
 }
 
 fn percent(x: f64) -> String {

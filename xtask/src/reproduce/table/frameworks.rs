@@ -3,8 +3,8 @@
 //! `meshvae train --net` on the same split, protocol and stopping rule, beside the paper's
 //! figure for the matching data set (Horse in our copy's units).
 
-use super::aggregate;
 use super::claims::verdict;
+use super::{aggregate, seed_list};
 use crate::reproduce::Outcome;
 use crate::reproduce::paper::{self, FrameworkRow};
 use crate::reproduce::plan::{OURS, column};
@@ -151,15 +151,6 @@ pub(super) fn seeds_below(
         }
     }
     (below, not)
-}
-
-/// "seed 1" or "seeds 1, 3".
-fn seed_list(seeds: &[u64]) -> String {
-    let names: Vec<String> = seeds.iter().map(u64::to_string).collect();
-    match seeds.len() {
-        1 => format!("seed {}", names[0]),
-        _ => format!("seeds {}", names.join(", ")),
-    }
 }
 
 /// `table:ERMS`'s claim, ours below every other network, set by set and seed by seed.

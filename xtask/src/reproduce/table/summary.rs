@@ -6,7 +6,7 @@
 
 use super::claims::{rank, verdict, wins};
 use super::frameworks::{ROWS, seeds_below};
-use super::{aggregate, columns_of};
+use super::{aggregate, columns_of, seed_list};
 use crate::reproduce::Outcome;
 use crate::reproduce::paper;
 use crate::reproduce::plan::{Budget, Group, OURS};
@@ -210,7 +210,7 @@ fn seeds_phrase(stat: &Stat, planned: u64) -> String {
     }
 }
 
-/// "Ours ranks 4th, 8th and 1st of the 8 ablation networks on seeds 1, 2 and 3."
+/// "Ours ranks 4th, 8th and 1st of the 8 ablation networks on seeds 1, 2, 3."
 fn ranks_sentence(o: &Outcome, dataset: &str) -> Option<String> {
     let mut seeds: Vec<u64> = (o.results.iter())
         .filter(|r| r.dataset == dataset && r.column == OURS)
@@ -347,15 +347,6 @@ fn and_list(items: &[String]) -> String {
     }
 }
 
-/// "seed 1", "seeds 1 and 2", "seeds 1, 2 and 3".
-fn seed_list(seeds: &[u64]) -> String {
-    let names: Vec<String> = seeds.iter().map(u64::to_string).collect();
-    match names.len() {
-        1 => format!("seed {}", names[0]),
-        _ => format!("seeds {}", and_list(&names)),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -363,7 +354,7 @@ mod tests {
     use crate::reproduce::table::tests::{outcome, result};
 
     #[test]
-    fn ordinals_and_lists_read_as_english() {
+    fn ordinals_and_seed_lists_read_as_english() {
         let got: Vec<String> = [1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 101]
             .map(ordinal)
             .into();
@@ -373,7 +364,7 @@ mod tests {
                 "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "101st"
             ]
         );
-        assert_eq!(seed_list(&[1, 2, 3]), "seeds 1, 2 and 3");
+        assert_eq!(seed_list(&[1, 2, 3]), "seeds 1, 2, 3");
         assert_eq!(seed_list(&[2]), "seed 2");
     }
 
@@ -445,7 +436,7 @@ mod tests {
             "{text}"
         );
         assert!(
-            text.contains("Ours ranks 1st and 8th of the 8 ablation networks on seeds 1 and 2."),
+            text.contains("Ours ranks 1st and 8th of the 8 ablation networks on seeds 1, 2."),
             "{text}"
         );
         assert!(
