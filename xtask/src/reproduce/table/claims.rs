@@ -31,18 +31,42 @@ pub(super) fn wins(results: &[RunResult], dataset: &str, column: &str) -> (usize
     (below, both)
 }
 
+/// Whether ours is below another network on the seeds both have finished.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Verdict {
+    NoSharedSeed,
+    /// Below on every shared seed.
+    Holds,
+    /// Below on none.
+    DoesNotHold,
+    /// Below on some: the seeds still to run cannot settle it either way.
+    NotSettled,
+}
+
+impl Verdict {
+    /// The verdict for ours below the other on `below` of `both` shared seeds.
+    pub(super) fn of(below: usize, both: usize) -> Self {
+        match (below, both) {
+            (_, 0) => Self::NoSharedSeed,
+            (b, n) if b == n => Self::Holds,
+            (0, _) => Self::DoesNotHold,
+            _ => Self::NotSettled,
+        }
+    }
+}
+
 /// "holds", "does not hold" or "not settled" for ours below the other on `below` of `both`
 /// seeds, of the `planned` seeds: a verdict of fewer seeds than planned is one "so far" (the
 /// seeds still to run may undo it; a mixed one is settled already).
 pub(super) fn verdict(below: usize, both: usize, planned: u64) -> &'static str {
     let partial = (both as u64) < planned;
-    match (below, both) {
-        (_, 0) => "no shared seed",
-        (b, n) if b == n && partial => "**holds** so far",
-        (b, n) if b == n => "**holds**",
-        (0, _) if partial => "**does not hold** so far",
-        (0, _) => "**does not hold**",
-        _ => "not settled",
+    match (Verdict::of(below, both), partial) {
+        (Verdict::NoSharedSeed, _) => "no shared seed",
+        (Verdict::Holds, true) => "**holds** so far",
+        (Verdict::Holds, false) => "**holds**",
+        (Verdict::DoesNotHold, true) => "**does not hold** so far",
+        (Verdict::DoesNotHold, false) => "**does not hold**",
+        (Verdict::NotSettled, _) => "not settled",
     }
 }
 

@@ -4,7 +4,7 @@
 //! README's figures cannot drift from it; [`replace_block`] puts it between the README's markers
 //! for the page.
 
-use super::claims::{rank, verdict, wins};
+use super::claims::{Verdict, rank, verdict, wins};
 use super::frameworks::{ROWS, seeds_below};
 use super::{aggregate, columns_of, seed_list};
 use crate::reproduce::Outcome;
@@ -255,11 +255,11 @@ fn claims_sentence(o: &Outcome, dataset: &str) -> Option<String> {
     for c in &others {
         let (below, both) = wins(&o.results, dataset, c.id);
         partial |= both > 0 && (both as u64) < o.options.seeds;
-        match (below, both) {
-            (_, 0) => waiting += 1,
-            (b, n) if b == n => holds.push(c.label),
-            (0, _) => fails.push(c.label),
-            _ => open += 1,
+        match Verdict::of(below, both) {
+            Verdict::NoSharedSeed => waiting += 1,
+            Verdict::Holds => holds.push(c.label),
+            Verdict::DoesNotHold => fails.push(c.label),
+            Verdict::NotSettled => open += 1,
         }
     }
     if waiting == others.len() {
