@@ -70,6 +70,7 @@
 //! # Ok(()) }
 //! ```
 
+mod bias;
 mod buffers;
 mod cheb;
 mod cheb_kernel;
