@@ -7,7 +7,7 @@
 //! the bias gradient keeps every bit, and a network trained with it matches one trained with
 //! `broadcast_add` exactly.
 
-use crate::custom_op::contiguous_span;
+use crate::custom_op::{contiguous_span, cpu_slice};
 use candle_core::{CpuStorage, CustomOp2, DType, Layout, Shape, Tensor, WithDType};
 
 const NAME: &str = "bias-add";
@@ -89,17 +89,16 @@ impl CustomOp2 for BiasAdd {
         // reads it in.
         let g = grad.contiguous()?;
         let c = b.elem_count();
+        let (storage, layout) = g.storage_and_layout();
         let db = match g.dtype() {
-            DType::F32 => Tensor::from_vec(
-                sum_rows(&g.flatten_all()?.to_vec1::<f32>()?, c),
-                c,
-                b.device(),
-            )?,
-            DType::F64 => Tensor::from_vec(
-                sum_rows(&g.flatten_all()?.to_vec1::<f64>()?, c),
-                c,
-                b.device(),
-            )?,
+            DType::F32 => {
+                let sums = sum_rows(cpu_slice::<f32>(NAME, &storage, layout)?, c);
+                Tensor::from_vec(sums, c, b.device())?
+            }
+            DType::F64 => {
+                let sums = sum_rows(cpu_slice::<f64>(NAME, &storage, layout)?, c);
+                Tensor::from_vec(sums, c, b.device())?
+            }
             other => candle_core::bail!("{NAME}: dtype {other:?} not supported"),
         };
         Ok((Some(grad.clone()), Some(db)))
