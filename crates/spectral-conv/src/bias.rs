@@ -8,20 +8,21 @@
 //! `broadcast_add` exactly.
 
 use crate::custom_op::{contiguous_span, cpu_slice};
+use crate::spmm::{Backend, use_kernel};
 use candle_core::{CpuStorage, CustomOp2, DType, Layout, Shape, Tensor, WithDType};
 
 const NAME: &str = "bias-add";
 
-/// x + b for b of shape `[C]` and x of shape `[…, C]`: the custom op on CPU f32/f64 tensors,
-/// `broadcast_add` for anything else (other devices, dtypes or bias shapes).
-pub(crate) fn add_bias(x: &Tensor, b: &Tensor) -> candle_core::Result<Tensor> {
+/// x + b for b of shape `[C]` and x of shape `[…, C]`: the custom op under
+/// [`Backend::Kernel`] on CPU f32/f64 tensors, `broadcast_add` for anything else (the fallback
+/// backend, other devices, dtypes or bias shapes).
+pub(crate) fn add_bias(x: &Tensor, b: &Tensor, backend: Backend) -> candle_core::Result<Tensor> {
     let c = x.dims().last().copied().unwrap_or(0);
-    let fits = x.device().is_cpu()
+    let fits = use_kernel(backend, x)
         && b.device().is_cpu()
         && b.dims() == [c]
         && c > 0
-        && x.dtype() == b.dtype()
-        && matches!(x.dtype(), DType::F32 | DType::F64);
+        && x.dtype() == b.dtype();
     if fits {
         x.contiguous()?.apply_op2(&b.contiguous()?, BiasAdd)
     } else {
@@ -171,7 +172,9 @@ mod tests {
         for dtype in [DType::F32, DType::F64] {
             for dims in [vec![4, 37, 16], vec![50, 3], vec![7]] {
                 for transposed in [false, true] {
-                    let ours = run(dtype, &dims, transposed, add_bias);
+                    let ours = run(dtype, &dims, transposed, |x, b| {
+                        add_bias(x, b, Backend::Kernel)
+                    });
                     let theirs = run(dtype, &dims, transposed, |x, b| x.broadcast_add(b));
                     let case = format!("{dtype:?} {dims:?} transposed {transposed}");
                     assert_eq!(ours[0], theirs[0], "{case}: values");
@@ -196,10 +199,10 @@ mod tests {
     fn other_shapes_fall_back_to_broadcast_add() {
         let x = Tensor::ones((2, 3), DType::F32, &Device::Cpu).unwrap();
         let b = Tensor::new(&[[1f32, 2.0, 3.0]], &Device::Cpu).unwrap();
-        let y = add_bias(&x, &b).unwrap();
+        let y = add_bias(&x, &b, Backend::Kernel).unwrap();
         assert_eq!(y.to_vec2::<f32>().unwrap(), vec![vec![2.0, 3.0, 4.0]; 2]);
         // A bias that fits no dimension is candle's shape error, not a panic.
         let wrong = Tensor::new(&[1f32, 2.0], &Device::Cpu).unwrap();
-        assert!(add_bias(&x, &wrong).is_err());
+        assert!(add_bias(&x, &wrong, Backend::Kernel).is_err());
     }
 }

@@ -172,7 +172,7 @@ impl SpatialConv {
         let flat2 = |t: &Tensor| t.reshape((rows, c_in));
         let y = (flat2(&flat)?.matmul(&self.w_self)? + flat2(&mean)?.matmul(&self.w_nb)?)?;
         let y = match &self.bias {
-            Some(b) => crate::bias::add_bias(&y, b)?,
+            Some(b) => crate::bias::add_bias(&y, b, self.neighbour_mean.backend())?,
             None => y,
         };
         let mut dims = x.dims().to_vec();
@@ -193,7 +193,7 @@ impl SpatialConv {
         let y = (flat(&x3)?.matmul(&self.w_self)? + flat(&mean)?.matmul(&self.w_nb)?)?
             .reshape((batch, v, c_out))?;
         let y = match &self.bias {
-            Some(b) => crate::bias::add_bias(&y, b)?,
+            Some(b) => crate::bias::add_bias(&y, b, self.neighbour_mean.backend())?,
             None => y,
         };
         Ok(if squeeze { y.squeeze(0)? } else { y })

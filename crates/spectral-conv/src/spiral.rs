@@ -184,7 +184,7 @@ impl SpiralConv {
             self.gathered_matmul(&x3)?
         };
         let y = match &self.bias {
-            Some(b) => crate::bias::add_bias(&y, b)?,
+            Some(b) => crate::bias::add_bias(&y, b, self.backend)?,
             None => y,
         };
         Ok(if squeeze { y.squeeze(0)? } else { y })
