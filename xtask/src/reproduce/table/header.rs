@@ -97,8 +97,7 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
     let _ = writeln!(md, "- Protocol: {}.", opts.protocol.description);
     let _ = writeln!(
         md,
-        "- Machine: {} cores (`nproc`), {} (this invocation's: a result file does not record \
-         the machine of its run). Wall time of this invocation {:.1} min{}; the runs' own time \
+        "- Machine of this invocation: {} cores (`nproc`), {}. Wall time of this invocation {:.1} min{}; the runs' own time \
          summed (earlier invocations included) {:.1} min, of which training {:.1} min{}.",
         o.machine.cores,
         o.machine.cpu,
@@ -125,6 +124,7 @@ pub(super) fn header(md: &mut String, o: &Outcome) {
             list.join(", ")
         );
     }
+    machines(md, o);
     code(md, o);
     if let Some(records) = &opts.records {
         let folder = |set: &str, suffix: &str| {
@@ -227,6 +227,47 @@ pub(super) fn converged_training(max_steps: usize) -> String {
 
 /// "- Code: the records name commit `…` (12 runs) …": which code made the numbers, from the
 /// records themselves (an invocation may reuse records made by earlier commits).
+/// "- Runs' machines: Intel(R) Xeon(R) Processor (avx2, fma, avx512f; L1d 48K …) 50 runs, …":
+/// the machines the records name, since the bits of a run depend on the machine's SIMD
+/// features and data caches (`meshvae::Platform`).
+fn machines(md: &mut String, o: &Outcome) {
+    let mut seen: Vec<(String, usize)> = Vec::new();
+    let mut unnamed = 0;
+    for r in &o.results {
+        let Some(platform) = &r.platform else {
+            unnamed += 1;
+            continue;
+        };
+        let name = platform.to_string();
+        match seen.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, count)) => *count += 1,
+            None => seen.push((name, 1)),
+        }
+    }
+    if seen.is_empty() {
+        return;
+    }
+    let runs = |n: usize| if n == 1 { "run" } else { "runs" };
+    let mut parts: Vec<String> = seen
+        .iter()
+        .map(|(name, n)| format!("{name}: {n} {}", runs(*n)))
+        .collect();
+    if unnamed > 0 {
+        parts.push(format!(
+            "not named: {unnamed} {} (written before records kept the machine)",
+            runs(unnamed)
+        ));
+    }
+    let _ = writeln!(
+        md,
+        "- Runs' machines: {}. Machines that differ in SIMD features or data caches train the \
+         same run to other numbers (the matrix products block their sums by the caches' sizes; \
+         a last-bit difference grows over the steps), as another seed would; `--check` expects \
+         the same digits only on a machine like the record's.",
+        parts.join("; ")
+    );
+}
+
 fn code(md: &mut String, o: &Outcome) {
     if o.results.is_empty() {
         return;

@@ -136,7 +136,9 @@ fn tables_show_mean_std_and_the_relative_change() {
     assert!(line.contains("of 21 pairs"), "{line}");
     assert!(md.contains("- Paper: Our Method < "), "{md}");
     assert!(md.contains("## Hand-written notes\n\nKEPT"));
-    assert!(md.contains("Machine: 2 cores (`nproc`), test CPU"));
+    assert!(md.contains("Machine of this invocation: 2 cores (`nproc`), test CPU"));
+    // No record names its machine: no line about the runs' machines.
+    assert!(!md.contains("Runs' machines"), "{md}");
 
     // Max pooling below ours by less than the spread: named, "within one standard deviation".
     for r in results.iter_mut().filter(|r| r.column == "max") {
@@ -146,6 +148,31 @@ fn tables_show_mean_std_and_the_relative_change() {
     assert!(md.contains("ours is **not** the lowest. Below it: modified QEM, max pooling (0.8500"));
     assert!(md.contains("within one standard deviation"));
     assert!(md.contains(BEGIN_HAND_WRITTEN) && md.contains(END_HAND_WRITTEN));
+}
+
+#[test]
+fn the_runs_machines_are_counted_from_their_records() {
+    let platform = |cpu: &str, caches: &str| meshvae::Platform {
+        cpu: cpu.into(),
+        simd: vec!["avx2".into(), "fma".into()],
+        caches: caches.into(),
+    };
+    let mut results: Vec<RunResult> = ["ours", "no-pool", "spatial", "max"]
+        .iter()
+        .map(|c| result(c, 1, 1.0))
+        .collect();
+    results[0].platform = Some(platform("A", "L1d 48K"));
+    results[1].platform = Some(platform("B", "L1d 32K"));
+    results[2].platform = Some(platform("A", "L1d 48K"));
+    let md = markdown(&outcome(results), None);
+    let machines = line(&md, "- Runs' machines: ");
+    assert!(
+        machines.starts_with(
+            "- Runs' machines: A (avx2, fma; L1d 48K): 2 runs; B (avx2, fma; L1d 32K): 1 run; \
+             not named: 1 run (written before records kept the machine)."
+        ),
+        "{machines}"
+    );
 }
 
 #[test]
