@@ -317,6 +317,16 @@ def test_save_writes_a_folder_the_cli_evaluates(cli, horse_torch, horse_model, h
     assert relative(mu.cpu(), mu_rust) < 1e-5
 
 
+STEP_LR, ADAM_EPS = 1e-3, 1e-8  # the compared step's learning rate and Adam's ε
+
+
+def _first_adam_step(g):
+    """What Adam's first step (zero moments, bias-corrected) subtracts from a weight whose
+    gradient is g: lr·g/(|g| + ε), ±lr but where |g| nears ε."""
+    g = np.asarray(g, np.float64)
+    return STEP_LR * g / (np.abs(g) + ADAM_EPS)
+
+
 def _one_step_each(horse_torch, horse_model, horse, double):
     """One torch step and one engine step from the same batch, weights, noise and learning
     rate; returns the loss terms of both, and per variable (torch's state after the step,
@@ -329,11 +339,11 @@ def _one_step_each(horse_torch, horse_model, horse, double):
     assert x.dtype == dtype
     eps = torch.randn(len(x), model.latent, generator=torch.Generator().manual_seed(5))
     eps = eps.to(dtype)
-    lr, betas = 1e-3, (0.9, 0.95)
-    terms, after, grads = _engine_step(model, x, eps, lr, betas, double=double)
+    lr, betas = STEP_LR, (0.9, 0.95)
+    terms, after, grads = _engine_step(model, x, eps, lr, betas, ADAM_EPS, double=double)
     model.train()
     before = {name: p.detach().clone() for name, p in model.named_parameters()}
-    optimizer = torch.optim.Adam(model.parameters(), lr=lr, betas=betas, eps=1e-8)
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr, betas=betas, eps=ADAM_EPS)
     loss = model.loss(x, eps)
     optimizer.zero_grad()
     loss.total.backward()
@@ -351,43 +361,72 @@ def _one_step_each(horse_torch, horse_model, horse, double):
     return [float(t.detach()) for t in loss], terms, variables
 
 
-def test_one_torch_step_equals_one_engine_step(horse_torch, horse_model, horse):
+@pytest.fixture(scope="module")
+def float64_step(horse_torch, horse_model, horse):
+    """The step of :func:`_one_step_each` in float64 on both sides: the reference the float32
+    steps are measured against."""
+    return _one_step_each(horse_torch, horse_model, horse, True)
+
+
+def test_one_torch_step_equals_one_engine_step(horse_torch, horse_model, horse, float64_step):
     """The same batch, weights, noise and learning rate as one step of meshvae train's CPU
-    engine, both in float32 (how each trains): the loss terms and the gradients agree, and so
-    do the weights after Adam's step, bar the few entries whose gradient is rounding noise
-    (Adam's first step moves every weight by about ±lr whatever its gradient's size, so there
-    the sign of the noise decides; the float64 test below has none)."""
+    engine, both in float32 (how each trains), each measured against the float64 step (where
+    torch and the engine agree to 1e-5, below): the loss terms agree, each side's gradients are
+    within float32 rounding of the float64 ones, and the weights after Adam's step agree but
+    where Adam's first step differs for the two float32 gradients (it moves a weight by about
+    ±lr whatever its gradient's size, so where the gradient is rounding noise, the noise
+    decides).
+
+    How close torch's float32 gradient comes depends on the BLAS torch calls, which meshvae does
+    not choose: torch 2.15 with MKL on an AMD EPYC is 2.4e-4 off for enc.conv0.weight (a weight
+    shared by the first and last convolution, whose gradient is summed over 12 meshes × 8,431
+    vertices), where the engine is 7e-6 off. So torch is held to the worst case of a float32 sum
+    of that length, n·2⁻²⁴ (6e-3), and the engine, whose sums meshvae controls, to 5e-5."""
     got_terms, terms, variables = _one_step_each(horse_torch, horse_model, horse, False)
+    _, _, reference = float64_step
     worst_term = max(abs(g - w) / abs(w) for g, w in zip(got_terms, terms))
     assert worst_term < 1e-5, (got_terms, terms)
-    worst_grad = worst_weight = 0.0
+    l2 = horse_torch.loss_weights.l2
+    start = {n: p.detach().numpy() for n, p in horse_torch.named_parameters()}  # before the step
+    summed = 12 * horse.positions.shape[1]
+    torch_bound = summed * 2.0**-24
+    worst_torch = worst_engine = worst_weight = 0.0
     flipped = total = 0
     for name, (got, want, param, grad, want_grad) in variables.items():
         diff = np.abs(got - want)
         if param is None:  # batch norm's running statistics
             assert diff.max() < 1e-5, (name, diff.max())
             continue
-        grad_error = np.abs(grad - want_grad).max() / np.abs(want_grad).max()
-        worst_grad = max(worst_grad, grad_error)
-        assert grad_error < 5e-5, (name, grad_error)
-        total_grad = np.abs(param.grad.numpy())
-        noise = total_grad < 1e-5 * np.median(total_grad)
-        assert (diff[~noise] < 1e-5).all(), (name, diff[~noise].max())
-        worst_weight = max(worst_weight, float(diff[~noise].max()))
-        flipped += int((diff[noise] >= 1e-5).sum())
+        truth = reference[name][4]
+        scale = np.abs(truth).max()
+        torch_error = np.abs(grad - truth).max() / scale
+        engine_error = np.abs(want_grad - truth).max() / scale
+        worst_torch, worst_engine = max(worst_torch, torch_error), max(worst_engine, engine_error)
+        assert torch_error < torch_bound, (name, torch_error)
+        assert engine_error < 5e-5, (name, engine_error)
+        # The two steps differ by what Adam's first step makes of the two float32 gradients
+        # (the L2 term's w_l2·θ added, as both optimisers see it), and by nothing else.
+        before = start[name]
+        torch_step = _first_adam_step(grad + l2 * before)
+        expected = np.abs(torch_step - _first_adam_step(want_grad + l2 * before))
+        assert (np.abs(diff - expected) < 1e-5).all(), (name, np.abs(diff - expected).max())
+        apart = expected >= 1e-5
+        worst_weight = max(worst_weight, float(diff[~apart].max()))
+        flipped += int(apart.sum())
         total += diff.size
     print(
-        f"\nfloat32 step: loss terms {worst_term:.1e} (relative), gradients {worst_grad:.1e} "
-        f"(relative to each variable's largest), weights {worst_weight:.1e} apart, {flipped} of "
-        f"{total} weights with a rounding-noise gradient moved the other way"
+        f"\nfloat32 step: loss terms {worst_term:.1e} (relative); gradients from float64's, "
+        f"relative to each variable's largest: torch {worst_torch:.1e}, engine {worst_engine:.1e}; "
+        f"weights {worst_weight:.1e} apart, {flipped} of {total} weights moved apart as their "
+        f"float32 gradients' Adam steps differ"
     )
 
 
-def test_one_float64_torch_step_equals_one_engine_step(horse_torch, horse_model, horse):
+def test_one_float64_torch_step_equals_one_engine_step(float64_step):
     """The same step with both sides in float64 (the torch model and its operators, and the
     engine): every loss term to 1e-5 relative and every variable after the step to 1e-5, with
     no exception: without float32's rounding noise no gradient's sign is left to chance."""
-    got_terms, terms, variables = _one_step_each(horse_torch, horse_model, horse, True)
+    got_terms, terms, variables = float64_step
     worst_term = max(abs(g - w) / abs(w) for g, w in zip(got_terms, terms))
     assert worst_term < 1e-5, (got_terms, terms)
     worst_grad = worst_weight = 0.0
