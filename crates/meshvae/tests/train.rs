@@ -235,6 +235,42 @@ fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weigh
     let _ = std::fs::remove_dir_all(&early);
 }
 
+#[test]
+fn a_step_budget_run_killed_before_its_first_checkpoint_restarts() {
+    // Its config's `epochs` (here 1) is not its length: more epochs logged than that, no
+    // checkpoint and a run.json that never left `interrupted` is a run cut short, not a
+    // finished one.
+    let set = small_set(3, 8);
+    let dir = scratch("no-checkpoint-steps");
+    let mut req = request(&set, &dir, 1);
+    req.train.steps = Some(12);
+    let whole = train(&req, &options(false, false), |_| {}).unwrap();
+    assert!(whole.epochs_run >= 3, "{} epochs", whole.epochs_run);
+    let folder = ModelFolder::new(&dir);
+    std::fs::remove_file(folder.checkpoint()).unwrap();
+    let text = std::fs::read_to_string(folder.log()).unwrap();
+    let cut: String = text.lines().take(2).map(|l| format!("{l}\n")).collect();
+    std::fs::write(folder.log(), cut).unwrap();
+    let status = std::fs::read_to_string(folder.status()).unwrap();
+    assert!(status.contains("\"budget\""), "{status}");
+    std::fs::write(
+        folder.status(),
+        status.replace("\"budget\"", "\"interrupted\""),
+    )
+    .unwrap();
+
+    let resumed = train(&req, &options(true, false), |_| {}).unwrap();
+    assert_eq!(
+        resumed.epochs_run, whole.epochs_run,
+        "trained again from scratch"
+    );
+    assert_eq!(
+        read_status(&folder).unwrap().unwrap().stop_reason,
+        meshvae::StopReason::Budget
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Rewrites a model folder's checkpoint in the layout of version 1: no metadata, the weights
 /// inside as `model.*`, Adam's names prefixed twice, the counters packed into `meta.*` tensors.
 fn to_version_1(folder: &ModelFolder) {

@@ -163,7 +163,7 @@ pub(super) fn resume_setup(
     hierarchy_config: HierarchyConfig,
 ) -> Result<(ModelSpec, Hierarchy, MeshData)> {
     let mut spec = folder.read_spec()?;
-    refuse_finished_without_checkpoint(folder, spec.train.epochs)?;
+    refuse_finished_without_checkpoint(folder, &spec.train)?;
     let template = mesh_io::read_mesh(&folder.template())?.value;
     spec.check_set(request.set, &template, &folder.dir)?;
     let mut differences = Vec::new();
@@ -249,28 +249,33 @@ pub(super) fn resume_setup(
 /// most `checkpoint_seconds` of work. A *finished* run without its checkpoint (deleted by hand,
 /// or by `cargo xtask reproduce`, which keeps only the weights of the runs it has finished)
 /// would lose everything, its trained weights overwritten by a fresh run: that is refused.
-fn refuse_finished_without_checkpoint(folder: &ModelFolder, epochs: usize) -> Result<()> {
+/// `run.json` says which (`interrupted` until the run ends); only a folder from before it
+/// existed is judged by its log against its epoch budget.
+fn refuse_finished_without_checkpoint(folder: &ModelFolder, train: &TrainConfig) -> Result<()> {
     let log = folder.log();
     if folder.checkpoint().is_file() || !log.is_file() {
         return Ok(());
     }
-    if let Some(status) = super::read_status(folder)?
-        && status.stop_reason != StopReason::Interrupted
-    {
-        return Err(VaeError::model(
-            &folder.dir,
-            format!(
-                "cannot resume: its run finished ({}, {} epochs) but {}, which --resume \
-                 continues from, is gone; the trained weights are untouched. To train longer, \
-                 start a new folder (or this one with --force)",
-                status.stop_reason,
-                status.epochs,
-                folder.checkpoint().display()
-            ),
-        ));
+    match super::read_status(folder)? {
+        Some(status) if status.stop_reason == StopReason::Interrupted => return Ok(()),
+        Some(status) => {
+            return Err(VaeError::model(
+                &folder.dir,
+                format!(
+                    "cannot resume: its run finished ({}, {} epochs) but {}, which --resume \
+                     continues from, is gone; the trained weights are untouched. To train \
+                     longer, start a new folder (or this one with --force)",
+                    status.stop_reason,
+                    status.epochs,
+                    folder.checkpoint().display()
+                ),
+            ));
+        }
+        None => {}
     }
+    // A step budget's epochs are not its length (`train.epochs` then only sizes other things).
     let logged = logged_epochs(folder)?;
-    if logged > 0 && logged >= epochs {
+    if train.steps.is_none() && logged > 0 && logged >= train.epochs {
         return Err(VaeError::model(
             &folder.dir,
             format!(
