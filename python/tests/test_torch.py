@@ -378,9 +378,9 @@ def test_one_torch_step_equals_one_engine_step(horse_torch, horse_model, horse, 
     decides).
 
     How close torch's float32 gradient comes depends on the BLAS torch calls, which meshvae does
-    not choose: torch 2.15 with MKL on an AMD EPYC is 2.4e-4 off for enc.conv0.weight (a weight
-    shared by the first and last convolution, whose gradient is summed over 12 meshes × 8,431
-    vertices), where the engine is 7e-6 off. So torch is held to the worst case of a float32 sum
+    not choose: torch 2.15 with MKL on an AMD EPYC is 2.4e-4 off for enc.conv0.weight (the first
+    convolution's, whose gradient is summed over 12 meshes × 8,431 vertices), where the engine
+    is 7e-6 off. So torch is held to the worst case of a float32 sum
     of that length, n·2⁻²⁴ (6e-3), and the engine, whose sums meshvae controls, to 5e-5."""
     got_terms, terms, variables = _one_step_each(horse_torch, horse_model, horse, False)
     _, _, reference = float64_step
