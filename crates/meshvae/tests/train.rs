@@ -219,20 +219,28 @@ fn resuming_a_finished_run_without_its_checkpoint_is_refused_and_keeps_the_weigh
     // still restarts from scratch.
     let early = scratch("no-checkpoint-early");
     train(&request(&set, &early, 2), &options(false, false), |_| {}).unwrap();
-    let folder = ModelFolder::new(&early);
-    std::fs::remove_file(folder.checkpoint()).unwrap();
-    let text = std::fs::read_to_string(folder.log()).unwrap();
-    let first: String = text.lines().take(1).map(|l| format!("{l}\n")).collect();
-    std::fs::write(folder.log(), first).unwrap();
-    // Such a run's run.json says it was interrupted.
-    let status = std::fs::read_to_string(folder.status()).unwrap();
-    let status = status.replace("\"budget\"", "\"interrupted\"");
-    assert!(status.contains("interrupted"));
-    std::fs::write(folder.status(), status).unwrap();
+    killed_before_its_first_checkpoint(&ModelFolder::new(&early), 1);
     let resumed = train(&request(&set, &early, 2), &options(true, false), |_| {}).unwrap();
     assert_eq!(resumed.epochs_run, 2);
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&early);
+}
+
+/// Makes a finished folder look like a run killed after `epochs` epochs and before its first
+/// checkpoint: no checkpoint, that much log, and a run.json that still says `interrupted`.
+fn killed_before_its_first_checkpoint(folder: &ModelFolder, epochs: usize) {
+    std::fs::remove_file(folder.checkpoint()).unwrap();
+    let text = std::fs::read_to_string(folder.log()).unwrap();
+    let kept: String = text
+        .lines()
+        .take(epochs)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(folder.log(), kept).unwrap();
+    let status = std::fs::read_to_string(folder.status()).unwrap();
+    assert!(status.contains("\"budget\""), "{status}");
+    let status = status.replace("\"budget\"", "\"interrupted\"");
+    std::fs::write(folder.status(), status).unwrap();
 }
 
 #[test]
@@ -247,17 +255,7 @@ fn a_step_budget_run_killed_before_its_first_checkpoint_restarts() {
     let whole = train(&req, &options(false, false), |_| {}).unwrap();
     assert!(whole.epochs_run >= 3, "{} epochs", whole.epochs_run);
     let folder = ModelFolder::new(&dir);
-    std::fs::remove_file(folder.checkpoint()).unwrap();
-    let text = std::fs::read_to_string(folder.log()).unwrap();
-    let cut: String = text.lines().take(2).map(|l| format!("{l}\n")).collect();
-    std::fs::write(folder.log(), cut).unwrap();
-    let status = std::fs::read_to_string(folder.status()).unwrap();
-    assert!(status.contains("\"budget\""), "{status}");
-    std::fs::write(
-        folder.status(),
-        status.replace("\"budget\"", "\"interrupted\""),
-    )
-    .unwrap();
+    killed_before_its_first_checkpoint(&folder, 2);
 
     let resumed = train(&req, &options(true, false), |_| {}).unwrap();
     assert_eq!(
