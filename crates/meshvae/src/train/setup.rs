@@ -314,7 +314,7 @@ fn refuse_smaller_budget(folder: &ModelFolder, train: &TrainConfig) -> Result<()
     Err(VaeError::model(
         &folder.dir,
         format!(
-            "cannot resume with {flag} {budget}: the model has already trained {done}; give a              larger budget to train longer (nothing was changed)"
+            "cannot resume with {flag} {budget}: the model has already trained {done}; give a larger budget to train longer (nothing was changed)"
         ),
     ))
 }
