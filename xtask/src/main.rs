@@ -118,6 +118,10 @@ fn main() -> ExitCode {
         Task::Datasets { pack } => check_datasets(pack),
         Task::Reproduce(args) => match run_reproduce(args) {
             Ok(()) => ExitCode::SUCCESS,
+            Err(e) if e.is_interrupted() => {
+                eprintln!("error: {e}\nthe same command continues every run from its checkpoint");
+                ExitCode::from(130)
+            }
             Err(e) => {
                 eprintln!("error: {e}");
                 ExitCode::FAILURE

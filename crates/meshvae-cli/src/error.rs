@@ -22,9 +22,25 @@ pub enum CliError {
     },
     #[error("{}: {message}", path.display())]
     Output { path: PathBuf, message: String },
+    /// Training stopped by Ctrl-C or SIGTERM after writing its state; `resume` is the command
+    /// that continues it.
+    #[error("{source}\ncontinue it with: {resume}")]
+    Interrupted {
+        source: meshvae::VaeError,
+        resume: String,
+    },
 }
 
 impl CliError {
+    /// The process's exit status for this error: 130 (as a shell reports Ctrl-C) for an
+    /// interrupted training, 1 otherwise.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            Self::Interrupted { .. } => 130,
+            _ => 1,
+        }
+    }
+
     pub fn argument(argument: &'static str, message: impl Into<String>) -> Self {
         Self::Argument {
             argument,

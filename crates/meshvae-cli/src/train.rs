@@ -6,8 +6,8 @@ use deform_features::FeatureOptions;
 use mesh_hierarchy::{DepoolMode, HierarchyConfig};
 use mesh_io::MeshSet;
 use meshvae::{
-    ConvKind, ModelConfig, ModelFolder, ModelSpec, Network, Pooler, Schedule, Split, StopReason,
-    Structure, TrainConfig, TrainOptions, TrainRequest, TrainSummary,
+    ConvKind, ModelConfig, ModelFolder, ModelSpec, Network, Pooler, Schedule, Split, StopFlag,
+    StopReason, Structure, TrainConfig, TrainOptions, TrainRequest, TrainSummary, VaeError,
 };
 use std::path::{Path, PathBuf};
 
@@ -257,11 +257,36 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
         .unwrap_or_default();
     refuse_ours_only_flags(args, net)?;
     let request = train_request(args, &set, net, stored.as_ref())?;
-    let summary = meshvae::train(&request, &train_options(args), |_| {})?;
+    let options = TrainOptions {
+        stop: Some(StopFlag::on_interrupt()),
+        ..train_options(args)
+    };
+    let summary = meshvae::train(&request, &options, |_| {}).map_err(|e| match e {
+        VaeError::Interrupted { .. } => CliError::Interrupted {
+            source: e,
+            resume: format!(
+                "meshvae train {} --out {} --resume",
+                shell_word(&args.set),
+                shell_word(&args.out)
+            ),
+        },
+        e => e.into(),
+    })?;
     report_run(&summary);
     report_stop(&summary, request.train.schedule.patience, args);
     report_outputs(&folder, &request.model.labels, &args.out);
     Ok(())
+}
+
+/// `path` as one word of a shell command: quoted when it holds anything but plain characters.
+fn shell_word(path: &Path) -> String {
+    let text = path.display().to_string();
+    let plain = |c: char| c.is_ascii_alphanumeric() || "/._-+=:,@".contains(c);
+    if !text.is_empty() && text.chars().all(plain) {
+        text
+    } else {
+        format!("'{}'", text.replace('\'', r"'\''"))
+    }
 }
 
 /// The set with the labels a conditional model trains on: a --labels file's, or those a

@@ -478,3 +478,68 @@ fn the_test_loss_is_measured_every_50_steps_and_changes_no_weight() {
     let weights = |out: &std::path::Path| std::fs::read(out.join("weights.safetensors")).unwrap();
     assert_eq!(weights(&sparse), weights(&every));
 }
+
+/// Ctrl-C (SIGINT) stops a training cleanly: its best state written, status 130, and the
+/// command that continues it on stderr, which then does.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_writes_the_run_and_says_how_to_continue_it() {
+    use std::process::{Command, Stdio};
+    let (_dir, set, model) = synth_case("ctrl-c", 3);
+    // No timed checkpoint: what the folder holds after the signal, the signal wrote.
+    let child = Command::new(env!("CARGO_BIN_EXE_meshvae"))
+        .args(["train", s(&set), "--out", s(&model), "--epochs", "100000"])
+        .args([
+            "--batch",
+            "4",
+            "--latent",
+            "16",
+            "--checkpoint-seconds",
+            "1e9",
+        ])
+        .arg("--quiet")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Until the validation loss has been looked at twice (a best epoch exists).
+    let looked = || {
+        std::fs::read_to_string(model.join("log.jsonl")).map_or(0, |t| {
+            (t.lines().filter(|l| !l.contains("\"val_loss\":null"))).count()
+        })
+    };
+    let started = std::time::Instant::now();
+    while looked() < 2 && started.elapsed().as_secs() < 300 {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    assert!(looked() >= 2, "no validation loss logged in 300 s");
+    let pid = child.id().to_string();
+    let sent = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    assert!(sent.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(
+        stderr.contains("training interrupted after epoch"),
+        "{stderr}"
+    );
+    let resume = format!(
+        "continue it with: meshvae train {} --out {} --resume",
+        s(&set),
+        s(&model)
+    );
+    assert!(stderr.contains(&resume), "{stderr}");
+    let status: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model.join("run.json")).unwrap()).unwrap();
+    assert_eq!(status["stop_reason"], "interrupted");
+    assert!(model.join("checkpoint.safetensors").is_file());
+    assert!(!model.join("training.lock").exists());
+    // The printed command continues it (here with a budget two epochs past the stop).
+    let epochs = (status["epochs"].as_u64().unwrap() + 2).to_string();
+    let args = ["train", s(&set), "--out", s(&model), "--resume", "--quiet"];
+    let out = ok(&meshvae(&[&args[..], &["--epochs", &epochs]].concat()));
+    assert!(
+        out.contains(&format!("of at most {epochs} epochs")),
+        "{out}"
+    );
+}

@@ -18,9 +18,19 @@ pub enum VaeError {
     /// Training diverged.
     #[error("training stopped: {0}")]
     Diverged(String),
-    /// Training was interrupted (Ctrl-C); the last epoch's checkpoint is kept.
-    #[error("interrupted after epoch {epoch}; resume with --resume")]
-    Interrupted { epoch: usize },
+    /// Training stopped on request ([`crate::StopFlag`], e.g. Ctrl-C) after writing its best
+    /// epoch's state; resuming the folder continues the run.
+    #[error("{}: training interrupted after epoch {epoch}; {}", dir.display(), match checkpoint {
+        Some(c) => format!("its checkpoint holds epoch {c}, where a resumed run continues"),
+        None => "no checkpoint yet, so a resumed run starts afresh".to_string(),
+    })]
+    Interrupted {
+        dir: PathBuf,
+        /// The last epoch finished.
+        epoch: usize,
+        /// The epoch of the checkpoint in the folder (the best so far), if there is one.
+        checkpoint: Option<usize>,
+    },
     /// Reading or writing a file.
     #[error("{}: {source}", path.display())]
     Io {

@@ -110,8 +110,9 @@ pub use train::scaling::{InputScaling, PositionScaling};
 pub use train::schedule::{Decision, REWARM_STEPS, Schedule, ScheduleState, StopReason};
 pub use train::split::{Selection, Split, resolve_mesh};
 pub use train::{
-    EpochRecord, PhaseSeconds, RunStatus, SPIKE_FACTOR, SPIKE_WINDOW, TrainOptions, TrainRequest,
-    TrainSummary, hierarchy_config, loss_spikes, read_log, read_status, train, validation_loss,
+    EpochRecord, PhaseSeconds, RunStatus, SPIKE_FACTOR, SPIKE_WINDOW, StopFlag, TrainOptions,
+    TrainRequest, TrainSummary, hierarchy_config, loss_spikes, read_log, read_status, train,
+    validation_loss,
 };
 
 // A trained model folder loaded for use (`trained.rs`).

@@ -68,6 +68,13 @@ impl ReproError {
         }
     }
 
+    /// Whether Ctrl-C or SIGTERM stopped the runs (each wrote its state first, so the same
+    /// command continues them).
+    pub fn is_interrupted(&self) -> bool {
+        matches!(self, Self::Run { source, .. }
+            if matches!(**source, meshvae::VaeError::Interrupted { .. }))
+    }
+
     pub(crate) fn io(path: &Path, e: impl std::fmt::Display) -> Self {
         Self::Results {
             path: path.to_path_buf(),

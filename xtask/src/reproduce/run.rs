@@ -65,6 +65,7 @@ pub fn execute(
         checkpoint_seconds: place.checkpoint_seconds,
         // The results page reports the authors' choice beside ours.
         keep_selected_on_test: true,
+        stop: Some(meshvae::StopFlag::on_interrupt()),
         ..TrainOptions::default()
     };
     let mut session_train = 0.0;

@@ -13,8 +13,9 @@
 //! `checkpoint.safetensors`. The test loss is only logged, and chooses a second set of weights,
 //! `weights-selected-on-test.safetensors`, kept for comparison with the authors' protocol (they
 //! picked their checkpoint on the test half); measuring it changes nothing else, so no test
-//! mesh influences the model or its checkpoint. Killing the process at any moment loses at most the epochs since
-//! that write: `resume` restarts from the checkpoint, and because every random draw comes from
+//! mesh influences the model or its checkpoint. A raised [`StopFlag`] (Ctrl-C, with
+//! [`StopFlag::on_interrupt`]) stops the run after its current step with that write made first;
+//! killing the process at any moment loses at most the epochs since the last write: `resume` restarts from the checkpoint, and because every random draw comes from
 //! one seeded stream saved with it, the resumed run ends with the same weights as an
 //! uninterrupted one.
 //!
@@ -23,7 +24,8 @@
 //! a training mesh. The meshes' labels are saved in `config.json`; the split is drawn as for
 //! any model.
 //!
-//! This folder: the epoch loop (`trainer.rs`; request and summary in `request.rs`), the saved settings
+//! This folder: the epoch loop (`trainer.rs`; request and summary in `request.rs`, the stop request
+//! in `stop.rs`), the saved settings
 //! (`config.rs`), losses, schedule, data, split, the files a run
 //! writes (`folder.rs`, `checkpoint.rs`, `epoch_log.rs`, `status.rs`) and the loop's helpers.
 
@@ -48,6 +50,7 @@ pub(crate) mod schedule;
 mod setup;
 pub(crate) mod split;
 mod status;
+mod stop;
 mod trainer;
 
 pub use epoch_log::{EpochRecord, SPIKE_FACTOR, SPIKE_WINDOW, loss_spikes, read_log};
@@ -55,6 +58,7 @@ pub use loss_pass::validation_loss;
 pub use phases::PhaseSeconds;
 pub use request::{TrainOptions, TrainRequest, TrainSummary, hierarchy_config};
 pub use status::{RunStatus, read_status};
+pub use stop::StopFlag;
 
 /// Derives the training stream's seed from the user's (the split and the initial weights use
 /// the seed itself).

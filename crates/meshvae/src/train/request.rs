@@ -3,6 +3,7 @@
 
 use super::EpochRecord;
 use super::config::TrainConfig;
+use super::stop::StopFlag;
 use crate::executor::ExecutorChoice;
 use crate::net::config::ModelConfig;
 use crate::train::schedule::StopReason;
@@ -63,6 +64,10 @@ pub struct TrainOptions {
     /// Train with the hand-written CPU step ([`crate::EngineExecutor`]) whenever it supports the model;
     /// `false` forces candle's autograd path (the reference).
     pub engine: bool,
+    /// Stops the run cleanly once raised (see [`StopFlag`]; [`StopFlag::on_interrupt`] for
+    /// Ctrl-C): the best epoch's state is written and [`train`](super::train) returns
+    /// [`VaeError::Interrupted`](crate::VaeError::Interrupted).
+    pub stop: Option<StopFlag>,
     /// Tests only: the loss of this optimizer step (counted from 1) is taken as non-finite,
     /// once, to exercise the recovery from a divergence.
     #[doc(hidden)]
@@ -85,6 +90,7 @@ impl Default for TrainOptions {
             test_every_steps: 10,
             device: crate::executor::default_device(),
             engine: true,
+            stop: None,
             fail_step: None,
             fail_after_rollback: false,
         }

@@ -256,6 +256,11 @@ impl<'a> Trainer<'a> {
             let steps_before = self.adam.step_count();
             let mut executor = self.take_executor()?;
             let (sums, mut divergence) = self.train_epoch(epoch, executor.as_mut(), &bar)?;
+            if self.stop_requested() {
+                drop(executor);
+                bar.abandon();
+                return Err(self.interrupt()?);
+            }
             // Without validation meshes the score is the training loss, free to look at.
             let looked_at = epoch == self.epochs
                 || self.data.split.val.is_empty()
@@ -295,6 +300,10 @@ impl<'a> Trainer<'a> {
         Ok(self.summary(epochs_run, last))
     }
 
+    fn stop_requested(&self) -> bool {
+        (self.options.stop.as_ref()).is_some_and(|stop| stop.is_requested())
+    }
+
     /// The learning rate of optimizer step `step`.
     fn lr_at(&self, step: u64) -> f64 {
         (self.progress.schedule).lr(&self.schedule, self.base_lr, step)
@@ -331,6 +340,9 @@ impl<'a> Trainer<'a> {
                         *s += v * w;
                     }
                     bar.inc(1);
+                    if self.stop_requested() {
+                        break;
+                    }
                 }
                 Err(divergence) => return Ok((sums, Some(divergence))),
             }

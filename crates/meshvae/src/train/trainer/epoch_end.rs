@@ -1,11 +1,12 @@
 //! The end of an epoch that did not diverge: the schedule's decision, the test pass, the log
 //! line, the best weights, the files due, and what the run reports (`run.json`, the progress
-//! bar, the summary).
+//! bar, the summary, or the interruption).
 
 use super::Trainer;
-use crate::error::Result;
+use crate::error::{Result, VaeError};
 use crate::executor::Executor;
 use crate::train::best::{BestState, keep_weights, write_current};
+use crate::train::checkpoint::Checkpoint;
 use crate::train::epoch_log::{EpochRecord, append_log};
 use crate::train::request::TrainSummary;
 use crate::train::schedule::{Decision, StopReason};
@@ -170,6 +171,21 @@ impl Trainer<'_> {
         self.last_write = Instant::now();
         self.phases.bookkeeping += book.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// Ends a run asked to stop: the epoch under way is dropped, the best epoch's state and
+    /// `run.json` (`interrupted`) are written, and the error says where a resumed run goes on.
+    pub(super) fn interrupt(&mut self) -> Result<VaeError> {
+        self.write_files(false, Instant::now())?;
+        let checkpoint = self.folder.checkpoint();
+        Ok(VaeError::Interrupted {
+            dir: self.folder.dir.clone(),
+            epoch: self.progress.epoch,
+            checkpoint: match checkpoint.is_file() {
+                true => Checkpoint::epoch(&checkpoint)?,
+                false => None,
+            },
+        })
     }
 
     /// `run.json` as of now, saying `reason`.
