@@ -15,19 +15,19 @@
 //! picked their checkpoint on the test half); measuring it changes nothing else, so no test
 //! mesh influences the model or its checkpoint. A raised [`StopFlag`] (Ctrl-C, with
 //! [`StopFlag::on_interrupt`]) stops the run after its current step with that write made first;
-//! killing the process at any moment loses at most the epochs since the last write: `resume` restarts from the checkpoint, and because every random draw comes from
-//! one seeded stream saved with it, the resumed run ends with the same weights as an
-//! uninterrupted one.
+//! killing the process at any moment loses at most the epochs since the last write. `resume`
+//! restarts from the checkpoint, and because every random draw comes from one seeded stream
+//! saved with it, the resumed run ends with the same weights as an uninterrupted one.
 //!
 //! A conditional model (`model.labels` non-empty, e.g. from [`ModelConfig::conditional_on`](crate::ModelConfig::conditional_on))
 //! trains on the set's labels: every mesh needs one of the model's labels and every label needs
 //! a training mesh. The meshes' labels are saved in `config.json`; the split is drawn as for
 //! any model.
 //!
-//! This folder: the epoch loop (`trainer.rs`; request and summary in `request.rs`, the stop request
-//! in `stop.rs`), the saved settings
-//! (`config.rs`), losses, schedule, data, split, the files a run
-//! writes (`folder.rs`, `checkpoint.rs`, `epoch_log.rs`, `status.rs`) and the loop's helpers.
+//! This folder: the epoch loop (`trainer.rs`; request and summary in `request.rs`, the stop
+//! request in `stop.rs`), the saved settings (`config.rs`), losses, schedule, data, split, the
+//! files a run writes (`folder.rs`, `checkpoint.rs`, `epoch_log.rs`, `status.rs`) and the loop's
+//! helpers.
 
 use crate::error::Result;
 use trainer::Trainer;
