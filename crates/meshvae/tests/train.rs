@@ -4,7 +4,7 @@
 mod common;
 
 use candle_core::Device;
-use common::{options, request, scratch, small_set};
+use common::{assert_same_run, looking_request, options, request, scratch, small_set};
 use meshvae::{
     EpochRecord, ModelFolder, Schedule, StopReason, TrainOptions, TrainedModel, VaeError, read_log,
     read_status, train,
@@ -136,14 +136,7 @@ fn a_run_killed_after_its_best_epoch_replays_the_later_epochs_to_the_same_end() 
 fn a_killed_run_resumes_between_looks() {
     let set = small_set(3, 8);
     let epochs = 14;
-    let req = |out: &Path| {
-        let mut r = request(&set, out, epochs);
-        r.train.schedule.validate_every_steps = 4;
-        r.train.schedule.warmup_steps = 4;
-        r.train.schedule.decay_steps = 20;
-        r.train.grad_clip = 1.0;
-        r
-    };
+    let req = |out: &Path| looking_request(&set, out, epochs);
     let opts = |resume: bool| TrainOptions {
         checkpoint_seconds: 0.0,
         test_every_steps: 1,
@@ -168,24 +161,7 @@ fn a_killed_run_resumes_between_looks() {
     assert!(killed.is_err());
     let resumed = train(&req(&parts), &opts(true), |_| {}).unwrap();
     assert!(resumed.epochs_run > 0 && resumed.epochs_run < epochs);
-    let (fw, fp) = (ModelFolder::new(&whole), ModelFolder::new(&parts));
-    let read = |p: PathBuf| std::fs::read(p).unwrap();
-    assert!(read(fw.weights()) == read(fp.weights()), "weights differ");
-    let (la, lb) = (read_log(&fw.log()).unwrap(), read_log(&fp.log()).unwrap());
-    let losses = |l: &[EpochRecord]| {
-        l.iter()
-            .map(|r| (r.epoch, r.train_loss, r.val_loss))
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(losses(&la), losses(&lb), "logs differ");
-    let (sa, sb) = (
-        read_status(&fw).unwrap().unwrap(),
-        read_status(&fp).unwrap().unwrap(),
-    );
-    assert_eq!(
-        (sa.epochs, sa.steps, sa.best_epoch, sa.stop_reason),
-        (sb.epochs, sb.steps, sb.best_epoch, sb.stop_reason)
-    );
+    assert_same_run(&whole, &parts, "killed between looks");
     let _ = std::fs::remove_dir_all(&whole);
     let _ = std::fs::remove_dir_all(&parts);
 }

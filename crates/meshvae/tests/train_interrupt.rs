@@ -4,12 +4,11 @@
 
 mod common;
 
-use common::{options, request, scratch, small_set};
+use common::{assert_same_run, looking_request, options, request, scratch, small_set};
 use meshvae::{
-    EpochRecord, ModelFolder, StopFlag, StopReason, TrainOptions, VaeError, read_log, read_status,
-    train,
+    ModelFolder, StopFlag, StopReason, TrainOptions, VaeError, read_log, read_status, train,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 #[test]
 fn a_stopped_run_writes_its_best_state_and_resumes_to_the_uninterrupted_end() {
@@ -17,16 +16,7 @@ fn a_stopped_run_writes_its_best_state_and_resumes_to_the_uninterrupted_end() {
     for (in_memory, tag) in [(16usize << 20, "mem"), (0, "disk")] {
         let set = small_set(3, 8);
         let epochs = 14;
-        let req = |out: &Path| {
-            let mut r = request(&set, out, epochs);
-            // Looks at the validation loss every fourth step only, and clips (a running mean
-            // in the optimiser's state): both must come back from the checkpoint.
-            r.train.schedule.validate_every_steps = 4;
-            r.train.schedule.warmup_steps = 4;
-            r.train.schedule.decay_steps = 20;
-            r.train.grad_clip = 1.0;
-            r
-        };
+        let req = |out: &Path| looking_request(&set, out, epochs);
         // No timed write during the run: whatever the folder holds after the stop, the stop
         // wrote.
         let opts = |resume: bool, stop: Option<StopFlag>| TrainOptions {
@@ -71,7 +61,7 @@ fn a_stopped_run_writes_its_best_state_and_resumes_to_the_uninterrupted_end() {
 
         let resumed = train(&req(&parts), &opts(true, None), |_| {}).unwrap();
         assert_eq!(resumed.epochs_run, epochs - status.best_epoch, "{tag}");
-        same_run(&whole, &parts, tag);
+        assert_same_run(&whole, &parts, tag);
         let _ = std::fs::remove_dir_all(&whole);
         let _ = std::fs::remove_dir_all(&parts);
     }
@@ -105,29 +95,4 @@ fn a_run_stopped_in_its_first_epoch_leaves_no_checkpoint_and_restarts() {
     let resumed = train(&request(&set, &dir, 3), &opts(true, None), |_| {}).unwrap();
     assert_eq!(resumed.epochs_run, 3);
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// The two folders hold the same weights, log losses and run record.
-fn same_run(a: &Path, b: &Path, tag: &str) {
-    let (fa, fb) = (ModelFolder::new(a), ModelFolder::new(b));
-    let read = |p: PathBuf| std::fs::read(p).unwrap();
-    assert!(
-        read(fa.weights()) == read(fb.weights()),
-        "{tag}: weights differ"
-    );
-    let losses = |f: &ModelFolder| {
-        (read_log(&f.log()).unwrap().iter())
-            .map(|r: &EpochRecord| (r.epoch, r.train_loss, r.val_loss, r.test_loss))
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(losses(&fa), losses(&fb), "{tag}: logs differ");
-    let (sa, sb) = (
-        read_status(&fa).unwrap().unwrap(),
-        read_status(&fb).unwrap().unwrap(),
-    );
-    assert_eq!(
-        (sa.epochs, sa.steps, sa.best_epoch, sa.stop_reason),
-        (sb.epochs, sb.steps, sb.best_epoch, sb.stop_reason),
-        "{tag}"
-    );
 }

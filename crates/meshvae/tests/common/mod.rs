@@ -6,7 +6,10 @@ use deform_features::FeatureOptions;
 use mesh_hierarchy::HierarchyConfig;
 use mesh_io::MeshSet;
 use mesh_io::synth::{SynthConfig, generate};
-use meshvae::{ModelConfig, TrainConfig, TrainOptions, TrainRequest};
+use meshvae::{
+    EpochRecord, ModelConfig, ModelFolder, TrainConfig, TrainOptions, TrainRequest, read_log,
+    read_status,
+};
 use std::path::{Path, PathBuf};
 
 pub fn small_set(seed: u64, rings: usize) -> MeshSet {
@@ -55,4 +58,41 @@ pub fn options(resume: bool, force: bool) -> TrainOptions {
         force,
         ..TrainOptions::default()
     }
+}
+
+/// [`request`] looking at the validation loss only every fourth step, with a short warm-up and
+/// decay, and clipping (a running mean in the optimiser's state): what a resumed run must
+/// restore beyond the weights.
+pub fn looking_request<'a>(set: &'a MeshSet, out: &Path, epochs: usize) -> TrainRequest<'a> {
+    let mut r = request(set, out, epochs);
+    r.train.schedule.validate_every_steps = 4;
+    r.train.schedule.warmup_steps = 4;
+    r.train.schedule.decay_steps = 20;
+    r.train.grad_clip = 1.0;
+    r
+}
+
+/// The two model folders hold the same weights, log losses and run record, bit for bit.
+pub fn assert_same_run(a: &Path, b: &Path, tag: &str) {
+    let (fa, fb) = (ModelFolder::new(a), ModelFolder::new(b));
+    let read = |p: PathBuf| std::fs::read(p).unwrap();
+    assert!(
+        read(fa.weights()) == read(fb.weights()),
+        "{tag}: weights differ"
+    );
+    let losses = |f: &ModelFolder| {
+        (read_log(&f.log()).unwrap().iter())
+            .map(|r: &EpochRecord| (r.epoch, r.train_loss, r.val_loss, r.test_loss))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(losses(&fa), losses(&fb), "{tag}: logs differ");
+    let (sa, sb) = (
+        read_status(&fa).unwrap().unwrap(),
+        read_status(&fb).unwrap().unwrap(),
+    );
+    assert_eq!(
+        (sa.epochs, sa.steps, sa.best_epoch, sa.stop_reason),
+        (sb.epochs, sb.steps, sb.best_epoch, sb.stop_reason),
+        "{tag}: run records differ"
+    );
 }
