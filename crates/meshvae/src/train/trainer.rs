@@ -72,6 +72,9 @@ pub(super) struct Trainer<'a> {
     /// best weights themselves cannot train.
     trained_since_rollback: bool,
     last_looked_at: u64,
+    /// Optimizer steps at the end of the last finished epoch: `run.json`'s count (the steps of
+    /// an epoch a stop request cut short are dropped with it).
+    finished_steps: u64,
     /// Held while the trainer lives: no other training writes the folder meanwhile.
     _lock: TrainLock,
 }
@@ -171,6 +174,7 @@ impl<'a> Trainer<'a> {
             base_lr: spec.train.lr,
             prior_seconds: progress.seconds,
             last_looked_at: adam.step_count(),
+            finished_steps: adam.step_count(),
             _lock: lock,
             folder,
             spec,

@@ -33,6 +33,7 @@ impl Trainer<'_> {
         steps: EpochSteps,
         mut executor: Box<dyn Executor>,
     ) -> Result<(EpochRecord, bool)> {
+        self.finished_steps = self.adam.step_count();
         let n = self.data.split.train.len().max(1) as f64;
         // The schedule sees the loss that chooses the weights (validation, or training), and
         // counts the steps since it last saw one.
@@ -190,7 +191,7 @@ impl Trainer<'_> {
 
     /// `run.json` as of now, saying `reason`.
     fn status(&self, reason: StopReason) -> RunStatus {
-        let steps = self.adam.step_count();
+        let steps = self.finished_steps;
         let progress = &self.progress;
         RunStatus {
             stop_reason: reason,
