@@ -51,6 +51,29 @@ pub struct DemoArgs {
     tiny: bool,
 }
 
+/// A training the user stopped ends the demo there: what to run is the demo again, not the
+/// `meshvae train --resume` the train command suggests.
+fn interrupted_demo(e: CliError, args: &DemoArgs) -> CliError {
+    match e {
+        CliError::Interrupted { source, .. } => {
+            let mut again = format!(
+                "the demo stopped there; run it again with: meshvae demo --out {} --seed {}",
+                train::shell_word(&args.out),
+                args.seed
+            );
+            if let Some(n) = args.epochs {
+                again.push_str(&format!(" --epochs {n}"));
+            }
+            again.push_str(" --force");
+            CliError::Interrupted {
+                source,
+                next: again,
+            }
+        }
+        e => e,
+    }
+}
+
 /// Runs one of meshvae's commands on `argv` (its arguments after the command's name), printing
 /// the command line first so that the user can rerun or vary it.
 fn run_as<A: Args + FromArgMatches>(
@@ -211,7 +234,7 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
     if args.tiny {
         train_argv.extend(argv!["--latent", "16", "--batch", "4", "--quiet"]);
     }
-    run_as("train", &train_argv, train::run_train)?;
+    run_as("train", &train_argv, train::run_train).map_err(|e| interrupted_demo(e, args))?;
 
     out!("\n3. Evaluation on the meshes training never saw, beside the mean training shape.");
     run_as("eval", &argv![path("model")], crate::eval::run_eval)?;
@@ -299,4 +322,43 @@ pub fn run(args: &DemoArgs) -> Result<(), CliError> {
          {d}/model -n 20 --out more --sheet`"
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_interrupted_demo_says_to_run_the_demo_again() {
+        let args = DemoArgs {
+            out: PathBuf::from("my demo"),
+            epochs: Some(5),
+            seed: 3,
+            force: false,
+            tiny: false,
+        };
+        let stopped = CliError::Interrupted {
+            source: meshvae::VaeError::Interrupted {
+                dir: PathBuf::from("my demo/model"),
+                epoch: 7,
+                checkpoint: Some(6),
+            },
+            next: "continue it with: meshvae train 'my demo/set' --out 'my demo/model' --resume"
+                .into(),
+        };
+        let text = interrupted_demo(stopped, &args).to_string();
+        assert!(
+            text.contains("training interrupted after epoch 7"),
+            "{text}"
+        );
+        assert!(
+            text.ends_with(
+                "run it again with: meshvae demo --out 'my demo' --seed 3 --epochs 5 --force"
+            ),
+            "{text}"
+        );
+        assert!(!text.contains("--resume"), "{text}");
+        let other = interrupted_demo(CliError::argument("--out", "bad"), &args);
+        assert_eq!(other.to_string(), "--out: bad");
+    }
 }

@@ -22,12 +22,12 @@ pub enum CliError {
     },
     #[error("{}: {message}", path.display())]
     Output { path: PathBuf, message: String },
-    /// Training stopped by Ctrl-C or SIGTERM after writing its state; `resume` is the command
-    /// that continues it.
-    #[error("{source}\ncontinue it with: {resume}")]
+    /// Training stopped by Ctrl-C or SIGTERM after writing its state; `next` says what to run
+    /// to go on.
+    #[error("{source}\n{next}")]
     Interrupted {
         source: meshvae::VaeError,
-        resume: String,
+        next: String,
     },
 }
 

@@ -264,8 +264,8 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
     let summary = meshvae::train(&request, &options, |_| {}).map_err(|e| match e {
         VaeError::Interrupted { .. } => CliError::Interrupted {
             source: e,
-            resume: format!(
-                "meshvae train {} --out {} --resume",
+            next: format!(
+                "continue it with: meshvae train {} --out {} --resume",
                 shell_word(&args.set),
                 shell_word(&args.out)
             ),
@@ -279,7 +279,7 @@ pub fn run_train(args: &TrainArgs) -> Result<(), CliError> {
 }
 
 /// `path` as one word of a shell command: quoted when it holds anything but plain characters.
-fn shell_word(path: &Path) -> String {
+pub(crate) fn shell_word(path: &Path) -> String {
     let text = path.display().to_string();
     let plain = |c: char| c.is_ascii_alphanumeric() || "/._-+=:,@".contains(c);
     if !text.is_empty() && text.chars().all(plain) {
