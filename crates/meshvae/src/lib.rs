@@ -9,7 +9,8 @@
 //! whose graph operators come from a `mesh_hierarchy::Hierarchy` (Chebyshev or spatial
 //! convolutions from `spectral-conv`, pooling by edge contraction) → training with Adam,
 //! a learning-rate schedule, early stopping on the validation loss ([`Schedule`]; a run says
-//! why it stopped, [`StopReason`]), checkpoints and resumption → evaluation. On the CPU, training runs a hand-written forward +
+//! why it stopped, [`StopReason`]), checkpoints, resumption and a clean stop on request
+//! ([`StopFlag`], e.g. Ctrl-C) → evaluation. On the CPU, training runs a hand-written forward +
 //! backward over reused buffers ([`EngineExecutor`], checked against candle's autograd,
 //! [`CandleExecutor`]) when it supports the model (every CPU model of ours with K ≤ 8), and
 //! candle's autograd otherwise; both implement [`Executor`], and which one ran, and why candle
